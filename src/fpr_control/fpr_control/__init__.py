@@ -1,0 +1,1 @@
+"""Decentralized FPR controllers (C, NC, impedance) with wrench observers, and the ground teleoperation path."""

@@ -1,0 +1,1 @@
+"""On-board ArUco marker detection, relative-pose EKF and FPR state reconstruction."""

@@ -1,0 +1,1 @@
+"""MAVLink 2 offboard attitude/thrust bridge between the FPR controller and a PX4 autopilot."""
