@@ -36,7 +36,8 @@ def _fail(message: str) -> int:
 
 
 def main(argv: list[str]) -> int:
-    usage = 'usage: ros2 run <package> <executable> [args] | ros2 pkg prefix <package> | ros2 pkg executables [<package>]'
+    usage = ('usage: ros2 run <package> <executable> [args] | ros2 pkg prefix <package>'
+             ' | ros2 pkg executables [<package>]')
     if len(argv) >= 3 and argv[0] == 'run':
         package, executable = argv[1], argv[2]
         prefix = _prefix_of(package)
@@ -44,7 +45,8 @@ def main(argv: list[str]) -> int:
             return _fail(f'Package \'{package}\' not found (is install/setup.bash sourced?)')
         path = os.path.join(prefix, 'lib', package, executable)
         if executable not in _executables(prefix, package):
-            return _fail(f'No executable found: {package} {executable}; available: {", ".join(_executables(prefix, package))}')
+            available = ', '.join(_executables(prefix, package))
+            return _fail(f'No executable found: {package} {executable}; available: {available}')
         os.execv(path, [path, *argv[3:]])
     if len(argv) == 3 and argv[:2] == ['pkg', 'prefix']:
         prefix = _prefix_of(argv[2])
@@ -55,7 +57,10 @@ def main(argv: list[str]) -> int:
     if len(argv) in (2, 3) and argv[:2] == ['pkg', 'executables']:
         for prefix in _prefixes():
             index = os.path.join(prefix, 'share', 'ament_index', 'resource_index', 'packages')
-            packages = [argv[2]] if len(argv) == 3 else sorted(os.listdir(index)) if os.path.isdir(index) else []
+            if len(argv) == 3:
+                packages = [argv[2]]
+            else:
+                packages = sorted(os.listdir(index)) if os.path.isdir(index) else []
             for package in packages:
                 for exe in _executables(prefix, package):
                     print(package, exe)

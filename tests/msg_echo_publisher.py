@@ -5,9 +5,8 @@ Run as a separate process so the round trip crosses a process boundary through F
 import sys
 
 import rclpy
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile, QoSReliabilityPolicy
-
 from msg_samples import SAMPLES
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile, QoSReliabilityPolicy
 
 
 def main() -> int:

@@ -80,7 +80,8 @@ def uav_status() -> UavStatus:
 def fpr_state() -> FprState:
     return FprState(header=_header('world'), platform_pose=_pose(1.0),
                     platform_twist=Twist(linear=Vector3(x=0.1, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.2)),
-                    leg_angles=[1.0, 1.1, 1.2], leg_rates=[0.0, 0.0, 0.1], uav_poses=[_pose(2.0), _pose(3.0), _pose(4.0)],
+                    leg_angles=[1.0, 1.1, 1.2], leg_rates=[0.0, 0.0, 0.1],
+                    uav_poses=[_pose(2.0), _pose(3.0), _pose(4.0)],
                     uav_velocities=[Vector3(x=float(i), y=0.0, z=0.0) for i in range(3)],
                     uav_thrusts=[11.0, 11.5, 12.0], external_wrench=[0.0] * 8 + [-2.9],
                     contact_force=0.0, payload_mass=0.3, battery_voltages=[12.1, 12.0, 11.9])

@@ -7,10 +7,8 @@ import subprocess
 import sys
 import time
 
-import pytest
-
-rclpy = pytest.importorskip('rclpy', reason='rclpy comes with the workspace venv; run via scripts/run_tests.sh')
-from rclpy.qos import QoSDurabilityPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: E402
+import rclpy
+from rclpy.qos import QoSDurabilityPolicy, QoSProfile, QoSReliabilityPolicy
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
