@@ -1,0 +1,446 @@
+"""Rotations and quaternions: the one rotation module of the fpr project (thesis Appendix A).
+
+Conventions (DESIGN.md §2, spec §0.1):
+
+- Quaternions are numpy arrays ``[w, x, y, z]`` (scalar first), Hamilton product (A.48).
+- A rotation matrix / quaternion maps **body** coordinates to **world** coordinates:
+  ``v_world = R @ v_body = q ∘ [0, v_body] ∘ q̄`` (A.38), (A.55).
+- Angular rates ``body_rate`` are expressed in the body frame (``Aω`` of the thesis).
+- Euler ZYX: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (A.43); Euler ZXZ: ``R = Rz(psi1) @ Rx(phi) @ Rz(psi2)``
+  (A.44). Angles in radians.
+
+Errata applied (spec §0.2): E13 (Rodrigues), E14 (third component of (A.62)), E15 (yaw of (A.72)),
+E16 (ZXZ from matrix entries), E17 (det R = +1).
+
+Most functions accept leading batch dimensions (``(..., 4)`` quaternions, ``(..., 3, 3)`` matrices);
+the documented signatures are the scalar ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fpr_model._validation import as_angles, as_array, as_scalar, as_trailing
+
+__all__ = [
+    "attitude_error_vector",
+    "euler_rate_matrix",
+    "euler_rate_matrix_dot",
+    "euler_rate_matrix_inverse",
+    "euler_zxz_to_rotmat",
+    "euler_zyx_to_quat",
+    "euler_zyx_to_rotmat",
+    "quat_conjugate",
+    "quat_derivative",
+    "quat_error",
+    "quat_from_axis_angle",
+    "quat_from_rotvec",
+    "quat_integrate",
+    "quat_inverse",
+    "quat_left_matrix",
+    "quat_multiply",
+    "quat_normalize",
+    "quat_right_matrix",
+    "quat_rotate",
+    "quat_to_axis_angle",
+    "quat_to_euler_zyx",
+    "quat_to_rotmat",
+    "quat_to_rotvec",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "rotmat_to_euler_zxz",
+    "rotmat_to_euler_zyx",
+    "rotmat_to_quat",
+    "skew",
+]
+
+#: Below this sine of the middle Euler angle, the Euler decompositions are treated as gimbal-locked.
+GIMBAL_LOCK_TOLERANCE = 1e-12
+
+
+# --------------------------------------------------------------------------------------------------------
+# Basic matrices
+# --------------------------------------------------------------------------------------------------------
+def skew(v) -> np.ndarray:
+    """Skew-symmetric cross-product matrix ``[v]×`` (A.50), so that ``skew(a) @ b == cross(a, b)``.
+
+    ``v``: (3,) or (..., 3). Returns (3, 3) or (..., 3, 3).
+    """
+    v = as_trailing("v", v, (3,))
+    return _skew(v)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1] = -v[..., 2]
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    out[..., 1, 2] = -v[..., 0]
+    out[..., 2, 0] = -v[..., 1]
+    out[..., 2, 1] = v[..., 0]
+    return out
+
+
+def _elementary(angle, axis: int, name: str) -> np.ndarray:
+    a = as_angles(name, angle)
+    c, s = np.cos(a), np.sin(a)
+    out = np.zeros(a.shape + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    out[..., axis, axis] = 1.0
+    out[..., i, i] = c
+    out[..., j, j] = c
+    out[..., i, j] = -s
+    out[..., j, i] = s
+    return out
+
+
+def rot_x(a) -> np.ndarray:
+    """Elementary rotation about x by ``a`` rad (A.40): ``[[1,0,0],[0,c,-s],[0,s,c]]``."""
+    return _elementary(a, 0, "a")
+
+
+def rot_y(a) -> np.ndarray:
+    """Elementary rotation about y by ``a`` rad (A.41): ``[[c,0,s],[0,1,0],[-s,0,c]]``."""
+    return _elementary(a, 1, "a")
+
+
+def rot_z(a) -> np.ndarray:
+    """Elementary rotation about z by ``a`` rad (A.42): ``[[c,-s,0],[s,c,0],[0,0,1]]``."""
+    return _elementary(a, 2, "a")
+
+
+# --------------------------------------------------------------------------------------------------------
+# Quaternion algebra
+# --------------------------------------------------------------------------------------------------------
+def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def quat_multiply(a, b) -> np.ndarray:
+    """Hamilton product ``a ∘ b`` (A.48): ``[a0 b0 − a·b ; a0 b + b0 a + a × b]``. Shapes (..., 4)."""
+    return _quat_multiply(as_trailing("a", a, (4,)), as_trailing("b", b, (4,)))
+
+
+def quat_conjugate(q) -> np.ndarray:
+    """Conjugate ``q̄ = [q0, −q1:3]`` (A.47)."""
+    q = as_trailing("q", q, (4,))
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_inverse(q) -> np.ndarray:
+    """Inverse ``q^{-1} = q̄ / ‖q‖²``; raises ValueError for a zero quaternion."""
+    q = as_trailing("q", q, (4,))
+    norm2 = np.sum(q * q, axis=-1, keepdims=True)
+    if np.any(norm2 <= 0.0):
+        raise ValueError("q: zero quaternion has no inverse")
+    return q * np.array([1.0, -1.0, -1.0, -1.0]) / norm2
+
+
+def quat_normalize(q) -> np.ndarray:
+    """Unit quaternion ``q / ‖q‖``; raises ValueError on a zero, NaN or inf quaternion."""
+    q = as_trailing("q", q, (4,))
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(norm < 1e-300):
+        raise ValueError("q: cannot normalize a zero quaternion")
+    return q / norm
+
+
+def quat_rotate(q, v) -> np.ndarray:
+    """Rotate ``v`` by the unit quaternion ``q`` (A.55): ``[0; z] = q ∘ [0; v] ∘ q̄``, i.e. ``R(q) @ v``.
+
+    Uses ``z = v + 2 q0 (u × v) + 2 u × (u × v)`` with ``u = q1:3`` (no normalisation is applied).
+    """
+    q = as_trailing("q", q, (4,))
+    v = as_trailing("v", v, (3,))
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + q[..., :1] * t + np.cross(u, t)
+
+
+def _quat_to_rotmat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = w * w + x * x - y * y - z * z
+    out[..., 0, 1] = 2.0 * (x * y - w * z)
+    out[..., 0, 2] = 2.0 * (x * z + w * y)
+    out[..., 1, 0] = 2.0 * (x * y + w * z)
+    out[..., 1, 1] = w * w - x * x + y * y - z * z
+    out[..., 1, 2] = 2.0 * (y * z - w * x)
+    out[..., 2, 0] = 2.0 * (x * z - w * y)
+    out[..., 2, 1] = 2.0 * (y * z + w * x)
+    out[..., 2, 2] = w * w - x * x - y * y + z * z
+    return out
+
+
+def quat_to_rotmat(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (A.60), body -> world. ``q`` (..., 4) -> (..., 3, 3).
+
+    The quaternion is used as given (not normalised): pass unit quaternions.
+    """
+    return _quat_to_rotmat(as_trailing("q", q, (4,)))
+
+
+def rotmat_to_quat(R) -> np.ndarray:
+    """Unit quaternion of a rotation matrix, with ``w >= 0`` (A.61)-(A.66), erratum E14 applied.
+
+    The four branches (A.62)-(A.65) compute the largest of ``|q0|, |q1|, |q2|, |q3|`` from the diagonal
+    (A.61) and the others from the off-diagonal sums and differences. The selection rules (A.66) are
+    exactly "the largest of 1+r11+r22+r33, 1+r11−r22−r33, 1−r11+r22−r33, 1−r11−r22+r33", which is how
+    they are evaluated here (this also settles ties). The third component of the q0-branch is
+    ``(r13 − r31) / (4 q0)`` (E14). The result is normalised, then its sign chosen so that ``w >= 0``.
+    """
+    R = as_trailing("R", R, (3, 3))
+    r11, r12, r13 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    r21, r22, r23 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    r31, r32, r33 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    diag = np.stack(
+        [1 + r11 + r22 + r33, 1 + r11 - r22 - r33, 1 - r11 + r22 - r33, 1 - r11 - r22 + r33], axis=-1
+    )
+    branch = np.argmax(diag, axis=-1)
+    # 4 q_k^2 = diag_k; each candidate row is 4 q_k · q.
+    four_qk_q = np.stack(
+        [
+            np.stack([diag[..., 0], r32 - r23, r13 - r31, r21 - r12], axis=-1),  # q0-branch (A.62), E14
+            np.stack([r32 - r23, diag[..., 1], r12 + r21, r13 + r31], axis=-1),  # q1-branch (A.63)
+            np.stack([r13 - r31, r12 + r21, diag[..., 2], r23 + r32], axis=-1),  # q2-branch (A.64)
+            np.stack([r21 - r12, r13 + r31, r23 + r32, diag[..., 3]], axis=-1),  # q3-branch (A.65)
+        ],
+        axis=-2,
+    )
+    chosen = np.take_along_axis(four_qk_q, branch[..., None, None], axis=-2)[..., 0, :]
+    q = chosen / np.linalg.norm(chosen, axis=-1, keepdims=True)
+    return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def quat_from_axis_angle(axis, angle) -> np.ndarray:
+    """Quaternion ``[cos(angle/2), sin(angle/2)·u]`` of a rotation by ``angle`` rad about ``axis`` (A.56).
+
+    ``axis`` is normalised; raises ValueError if it is zero.
+    """
+    axis = as_trailing("axis", axis, (3,))
+    angle = as_angles("angle", angle)
+    norm = np.linalg.norm(axis, axis=-1, keepdims=True)
+    if np.any(norm < 1e-300):
+        raise ValueError("axis: zero rotation axis")
+    half = 0.5 * angle[..., None]
+    return np.concatenate([np.cos(half), np.sin(half) * axis / norm], axis=-1)
+
+
+def quat_to_axis_angle(q) -> tuple[np.ndarray, float]:
+    """Unit axis and angle in [0, π] of the rotation of ``q`` (shortest: ``q`` and ``−q`` are one attitude).
+
+    For the identity the axis is ``[1, 0, 0]`` and the angle 0. Scalar input only (shape (4,)).
+    """
+    q = quat_normalize(_as_quat(q))
+    if q[0] < 0.0:
+        q = -q
+    s = float(np.linalg.norm(q[1:]))
+    angle = 2.0 * float(np.arctan2(s, q[0]))
+    if s < 1e-300:
+        return np.array([1.0, 0.0, 0.0]), 0.0
+    return q[1:] / s, angle
+
+
+def quat_from_rotvec(rv) -> np.ndarray:
+    """Quaternion ``exp(rv/2)`` of the rotation vector ``rv`` (axis · angle, rad). Exact, smooth at 0."""
+    rv = as_trailing("rv", rv, (3,))
+    angle = np.linalg.norm(rv, axis=-1, keepdims=True)
+    # sin(angle/2)/angle = 0.5 * sinc(angle / (2π)) with numpy's normalised sinc.
+    return np.concatenate([np.cos(0.5 * angle), 0.5 * np.sinc(angle / (2.0 * np.pi)) * rv], axis=-1)
+
+
+def quat_to_rotvec(q) -> np.ndarray:
+    """Rotation vector (axis · angle, angle in [0, π]) of the unit quaternion ``q`` (the log map)."""
+    q = quat_normalize(as_trailing("q", q, (4,)))
+    q = np.where(q[..., :1] < 0.0, -q, q)
+    s = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
+    w = q[..., :1]
+    angle = 2.0 * np.arctan2(s, w)
+    small = s < 1e-8
+    # angle / s -> 2 / w (1 - s²/(3 w²) + ...) for small s; w ≈ 1 there.
+    factor = np.where(small, 2.0 / w * (1.0 - s * s / (3.0 * w * w)), angle / np.where(small, 1.0, s))
+    return factor * q[..., 1:]
+
+
+# --------------------------------------------------------------------------------------------------------
+# Euler angles
+# --------------------------------------------------------------------------------------------------------
+def euler_zyx_to_quat(roll, pitch, yaw) -> np.ndarray:
+    """Quaternion ``qz(yaw) ∘ qy(pitch) ∘ qx(roll)`` of ZYX Euler angles (A.67)-(A.71), rad."""
+    hr = 0.5 * as_angles("roll", roll)
+    hp = 0.5 * as_angles("pitch", pitch)
+    hy = 0.5 * as_angles("yaw", yaw)
+    cr, sr = np.cos(hr), np.sin(hr)
+    cp, sp = np.cos(hp), np.sin(hp)
+    cy, sy = np.cos(hy), np.sin(hy)
+    return np.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ],
+        axis=-1,
+    )
+
+
+def quat_to_euler_zyx(q) -> tuple[float, float, float]:
+    """ZYX Euler angles ``(roll, pitch, yaw)`` of a unit quaternion (A.72, erratum E15), rad.
+
+    ``roll = atan2(2(q0q1 + q2q3), q0² − q1² − q2² + q3²)``, ``pitch = asin(2(q0q2 − q1q3))``,
+    ``yaw = atan2(2(q0q3 + q1q2), q0² + q1² − q2² − q3²)``. At the gimbal lock (pitch = ±π/2) roll is set
+    to 0 and the whole rotation about z is reported as yaw. Scalar input (shape (4,)).
+    """
+    return rotmat_to_euler_zyx(_quat_to_rotmat(quat_normalize(_as_quat(q))))
+
+
+def euler_zyx_to_rotmat(roll, pitch, yaw) -> np.ndarray:
+    """``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (A.43)."""
+    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
+
+
+def rotmat_to_euler_zyx(R) -> tuple[float, float, float]:
+    """ZYX Euler angles ``(roll, pitch, yaw)`` of a rotation matrix (A.72), pitch in [−π/2, π/2].
+
+    ``roll = atan2(r32, r33)``, ``pitch = asin(−r31)``, ``yaw = atan2(r21, r11)``; at the gimbal lock
+    (|cos pitch| < 1e-12) roll = 0 and ``yaw = atan2(−r12, r22)``.
+    """
+    R = as_array("R", R, (3, 3))
+    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    cos_pitch = float(np.hypot(R[2, 1], R[2, 2]))
+    if cos_pitch < GIMBAL_LOCK_TOLERANCE:
+        return 0.0, pitch, float(np.arctan2(-R[0, 1], R[1, 1]))
+    pitch = float(np.arctan2(-R[2, 0], cos_pitch))  # better conditioned than asin near ±π/2
+    return float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))
+
+
+def euler_zxz_to_rotmat(psi1, phi, psi2) -> np.ndarray:
+    """``R = Rz(psi1) @ Rx(phi) @ Rz(psi2)`` (A.44), rad (Appendix D calibration constants)."""
+    return rot_z(psi1) @ rot_x(phi) @ rot_z(psi2)
+
+
+def rotmat_to_euler_zxz(R) -> tuple[float, float, float]:
+    """ZXZ Euler angles ``(psi1, phi, psi2)`` with phi in [0, π] (erratum E16: matrix forms).
+
+    ``psi1 = atan2(r13, −r23)``, ``phi = acos(r33)`` (evaluated as ``atan2(hypot(r13, r23), r33)``, which
+    is the same angle but accurate near 0 and π), ``psi2 = atan2(r31, r32)``. At the singularity
+    (sin phi < 1e-12) psi2 = 0 and ``psi1 = atan2(r21, r11)``.
+    """
+    R = as_array("R", R, (3, 3))
+    sin_phi = float(np.hypot(R[0, 2], R[1, 2]))
+    phi = float(np.arctan2(sin_phi, R[2, 2]))
+    if sin_phi < GIMBAL_LOCK_TOLERANCE:
+        return float(np.arctan2(R[1, 0], R[0, 0])), phi, 0.0
+    return float(np.arctan2(R[0, 2], -R[1, 2])), phi, float(np.arctan2(R[2, 0], R[2, 1]))
+
+
+# --------------------------------------------------------------------------------------------------------
+# Quaternion product matrices and rotational kinematics
+# --------------------------------------------------------------------------------------------------------
+def quat_left_matrix(q) -> np.ndarray:
+    """``Q(q)`` of (A.53): ``q ∘ p = Q(q) @ p``."""
+    q0, q1, q2, q3 = _as_quat(q)
+    return np.array(
+        [[q0, -q1, -q2, -q3], [q1, q0, -q3, q2], [q2, q3, q0, -q1], [q3, -q2, q1, q0]], dtype=float
+    )
+
+
+def quat_right_matrix(q) -> np.ndarray:
+    """``Q̄(q)`` of (A.54): ``p ∘ q = Q̄(q) @ p``."""
+    q0, q1, q2, q3 = _as_quat(q)
+    return np.array(
+        [[q0, -q1, -q2, -q3], [q1, q0, q3, -q2], [q2, -q3, q0, q1], [q3, q2, -q1, q0]], dtype=float
+    )
+
+
+def euler_rate_matrix(roll, pitch) -> np.ndarray:
+    """``D`` of (A.78): body rate ``ω = D @ [roll_rate, pitch_rate, yaw_rate]`` for ZYX angles.
+
+    ``D = [[1, 0, −sϑ], [0, cϕ, cϑ sϕ], [0, −sϕ, cϑ cϕ]]`` (ϕ roll, ϑ pitch). Singular at pitch = ±π/2.
+    """
+    roll = as_scalar("roll", roll)
+    pitch = as_scalar("pitch", pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    return np.array([[1.0, 0.0, -sp], [0.0, cr, cp * sr], [0.0, -sr, cp * cr]])
+
+
+def euler_rate_matrix_inverse(roll, pitch) -> np.ndarray:
+    """``D^{-1}`` of (A.80): ``η̇ = D^{-1} @ ω``; raises ValueError at the gimbal lock (cos pitch ≈ 0)."""
+    roll = as_scalar("roll", roll)
+    pitch = as_scalar("pitch", pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    if abs(cp) < GIMBAL_LOCK_TOLERANCE:
+        raise ValueError("pitch: D is singular at pitch = ±π/2 (gimbal lock)")
+    return np.array([[1.0, sr * sp / cp, cr * sp / cp], [0.0, cr, -sr], [0.0, sr / cp, cr / cp]])
+
+
+def euler_rate_matrix_dot(roll, pitch, roll_rate, pitch_rate) -> np.ndarray:
+    """Time derivative ``Ḋ`` of (A.82), so that ``ω̇ = D @ η̈ + Ḋ @ η̇`` (A.81)."""
+    roll = as_scalar("roll", roll)
+    pitch = as_scalar("pitch", pitch)
+    dr = as_scalar("roll_rate", roll_rate)
+    dp = as_scalar("pitch_rate", pitch_rate)
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    return np.array(
+        [
+            [0.0, 0.0, -cp * dp],
+            [0.0, -dr * sr, -dp * sp * sr + dr * cp * cr],
+            [0.0, -dr * cr, -dp * sp * cr - dr * cp * sr],
+        ]
+    )
+
+
+def quat_derivative(q, body_rate) -> np.ndarray:
+    """``q̇ = ½ q ∘ [0; ω]`` (A.84), ``ω`` the body-frame angular rate in rad/s."""
+    q = as_trailing("q", q, (4,))
+    body_rate = as_trailing("body_rate", body_rate, (3,))
+    pure = np.concatenate([np.zeros(body_rate.shape[:-1] + (1,)), body_rate], axis=-1)
+    return 0.5 * _quat_multiply(q, pure)
+
+
+def quat_integrate(q, body_rate, dt) -> np.ndarray:
+    """Exact integration of a constant body rate over ``dt`` s: ``q ∘ exp(ω dt / 2)``, renormalised."""
+    q = as_trailing("q", q, (4,))
+    body_rate = as_trailing("body_rate", body_rate, (3,))
+    dt = as_scalar("dt", dt)
+    out = _quat_multiply(q, quat_from_rotvec(body_rate * dt))
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def quat_error(q, q_des) -> np.ndarray:
+    """Error quaternion ``q_err = q^{-1} ∘ q_des`` (thesis (3.28)): the rotation from ``q`` to ``q_des``,
+    expressed in the frame of ``q`` (body frame)."""
+    q = as_trailing("q", q, (4,))
+    q_des = as_trailing("q_des", q_des, (4,))
+    norm2 = np.sum(q * q, axis=-1, keepdims=True)
+    if np.any(norm2 <= 0.0):
+        raise ValueError("q: zero quaternion has no inverse")
+    return _quat_multiply(q * np.array([1.0, -1.0, -1.0, -1.0]) / norm2, q_des)
+
+
+def attitude_error_vector(q, q_des) -> np.ndarray:
+    """Brescianini attitude error ``ε_o = sgn(q_err,0) · q_err,1:3`` (thesis (3.28)-(3.29)), body frame.
+
+    ``sgn(x) = +1`` for ``x >= 0``, ``−1`` otherwise. For small errors ``ε_o ≈ δφ / 2`` (spec §0.1 item 3).
+    """
+    err = quat_error(q, q_des)
+    sign = np.where(err[..., :1] >= 0.0, 1.0, -1.0)
+    return sign * err[..., 1:]
+
+
+def _as_quat(q) -> np.ndarray:
+    return as_array("q", q, (4,))

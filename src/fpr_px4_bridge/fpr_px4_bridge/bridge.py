@@ -1,0 +1,277 @@
+"""The bridge core (ROS-free): setpoints in, SET_ATTITUDE_TARGET stream out, PX4 state and telemetry back.
+
+One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` [s]:
+- :meth:`Px4Bridge.submit_setpoint` for each ``AttitudeThrustSetpoint`` (validated; forwarded at once when
+  streaming, so the latency to the wire is one encode + send);
+- :meth:`Px4Bridge.on_teleop` for each ``/fpr/teleop`` mode;
+- :meth:`Px4Bridge.tick` at ``stream_rate`` (>= 50 Hz): state machine, repetition of the latest setpoint while
+  it is younger than ``setpoint_timeout``, COMMAND_LONGs, the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
+- :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
+
+Thrust: newtons -> PX4 normalized thrust by (C.1)-(C.2) with the live battery voltage (:mod:`fpr_model.battery`),
+clamped to [thrust_min, 1]. The caller serializes access (one lock).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from fpr_model.battery import normalized_thrust
+
+from fpr_px4_bridge.link import MavlinkLink
+from fpr_px4_bridge.offboard import BridgeState, LogEvent, OffboardConfig, OffboardStateMachine
+from fpr_px4_bridge.px4_protocol import (
+    MAV_AUTOPILOT_INVALID,
+    MAV_STATE_ACTIVE,
+    MAV_TYPE_GCS,
+    MAV_TYPE_ONBOARD_CONTROLLER,
+    encode_set_attitude_target,
+)
+from fpr_px4_bridge.telemetry import TelemetryDecoder
+
+__all__ = ["BridgeConfig", "BridgeStatus", "Px4Bridge", "SetpointResult"]
+
+#: A battery voltage older than this is not used for the thrust normalization [s].
+_VOLTAGE_MAX_AGE = 5.0
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    uav_id: int = 1                       #: i in 1..n; setpoints for other ids are refused
+    target_system: int = 1                #: PX4 MAVLink system id
+    target_component: int = 1             #: PX4 autopilot component id
+    stream_rate: float = 50.0             #: [Hz] SET_ATTITUDE_TARGET repetition rate (>= 50)
+    setpoint_timeout: float = 0.25        #: [s] a setpoint older than this is not streamed
+    thrust_min: float = 0.05              #: lower clamp of the normalized thrust, in [0, 1)
+    a_f: float = 8.02                     #: [N/V] (C.2) slope of this vehicle (Table C.1)
+    b_f: float = -61.66                   #: [N] (C.2) offset of this vehicle (Table C.1)
+    fallback_voltage: float = 12.0        #: [V] used while no (valid) battery voltage is known
+    quaternion_tolerance: float = 1e-3    #: refuse setpoints with | |q| - 1 | above this
+    heartbeat_period: float = 1.0         #: [s] our HEARTBEAT period
+    offboard: OffboardConfig = OffboardConfig()
+
+    def __post_init__(self) -> None:
+        if self.stream_rate < 50.0:
+            raise ValueError(f"stream_rate must be >= 50 Hz, got {self.stream_rate}")
+        if not 0.0 < self.setpoint_timeout < self.offboard.heartbeat_timeout + 10.0:
+            raise ValueError(f"setpoint_timeout must be > 0, got {self.setpoint_timeout}")
+        if not 0.0 <= self.thrust_min < 1.0:
+            raise ValueError(f"thrust_min must be in [0, 1), got {self.thrust_min}")
+        if not all(math.isfinite(v) for v in (self.a_f, self.b_f, self.fallback_voltage)):
+            raise ValueError("a_f, b_f and fallback_voltage must be finite")
+        if self.a_f * self.fallback_voltage + self.b_f <= 0.0:
+            raise ValueError("f_max at fallback_voltage must be > 0 (check a_f, b_f, fallback_voltage)")
+
+
+@dataclass(frozen=True)
+class SetpointResult:
+    accepted: bool
+    sent: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class BridgeStatus:
+    """The content of ``fpr_msgs/UavStatus`` (without header)."""
+
+    uav_id: int
+    state: int
+    connected: bool
+    armed: bool
+    offboard: bool
+    failsafe: bool
+    px4_custom_mode: int
+    mode_name: str
+    battery_voltage: float
+    battery_remaining: float
+    link_age: float
+    setpoint_rate: float
+    rx_garbage: int
+    rejected_setpoints: int
+
+
+@dataclass
+class _Setpoint:
+    q_enu_flu: np.ndarray
+    thrust_newton: float
+    received: float
+
+
+class Px4Bridge:
+    """See the module docstring."""
+
+    def __init__(self, config: BridgeConfig, link: MavlinkLink, boot_time: float = 0.0) -> None:
+        self.config = config
+        self.link = link
+        self.machine = OffboardStateMachine(config.offboard)
+        self.telemetry = TelemetryDecoder()
+        self.boot_time = boot_time  # local time that our time_boot_ms counts from
+        self._setpoint: _Setpoint | None = None
+        self._last_heartbeat_sent = -math.inf
+        self._sent_times: deque[float] = deque()
+        self.rejected_setpoints = 0
+        self.setpoints_sent = 0
+        self.voltage_fallbacks = 0
+        self._pending_events: list[LogEvent] = []
+
+    # ---- events --------------------------------------------------------------------------------------------
+    def _event(self, level: str, key: str, text: str) -> None:
+        self._pending_events.append(LogEvent(level, key, text))
+
+    def take_events(self) -> list[LogEvent]:
+        events, self._pending_events = self._pending_events, []
+        return events
+
+    # ---- setpoints -----------------------------------------------------------------------------------------
+    def _validate(self, q_enu_flu, thrust_newton: float, uav_id: int) -> tuple[np.ndarray | None, str]:
+        if int(uav_id) != self.config.uav_id:
+            return None, f"setpoint for uav_id {uav_id} refused by the bridge of uav {self.config.uav_id}"
+        q = np.asarray(q_enu_flu, dtype=float)
+        if q.shape != (4,) or not np.isfinite(q).all():
+            return None, f"setpoint attitude not finite: {q.tolist()}"
+        norm = math.sqrt(float(q @ q))
+        if abs(norm - 1.0) > self.config.quaternion_tolerance:
+            return None, f"setpoint attitude not a unit quaternion (norm {norm:.6g})"
+        thrust = float(thrust_newton)
+        if not math.isfinite(thrust) or thrust < 0.0:
+            return None, f"setpoint thrust must be finite and >= 0 N, got {thrust}"
+        return q / norm, ""
+
+    def submit_setpoint(self, q_enu_flu, thrust_newton: float, uav_id: int, now: float) -> SetpointResult:
+        """A new setpoint (``q`` ``[w, x, y, z]`` body FLU -> local ENU, thrust [N]); refused ones are never sent."""
+        q, reason = self._validate(q_enu_flu, thrust_newton, uav_id)
+        if q is None:
+            self.rejected_setpoints += 1
+            self._event("warn", "setpoint.refused", reason + " (not forwarded)")
+            return SetpointResult(accepted=False, sent=False, reason=reason)
+        self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now)
+        sent = False
+        if self.machine.stream_allowed():
+            sent = self._send_setpoint(now)
+        return SetpointResult(accepted=True, sent=sent)
+
+    def setpoint_fresh(self, now: float) -> bool:
+        sp = self._setpoint
+        return sp is not None and now - sp.received <= self.config.setpoint_timeout
+
+    def battery_voltage(self, now: float) -> float:
+        battery = self.telemetry.battery
+        if battery is None or not math.isfinite(battery.voltage) or now - battery.stamp > _VOLTAGE_MAX_AGE:
+            return math.nan
+        return battery.voltage
+
+    def normalized_thrust(self, thrust_newton: float, now: float) -> float:
+        """(C.1)-(C.2) with the live voltage; the fallback voltage when it is unknown or outside the model."""
+        cfg = self.config
+        voltage = self.battery_voltage(now)
+        if math.isfinite(voltage):
+            try:
+                return normalized_thrust(thrust_newton, voltage, cfg.a_f, cfg.b_f, cfg.thrust_min)
+            except ValueError as error:
+                self.voltage_fallbacks += 1
+                self._event("warn", "thrust.voltage", f"{error}; using fallback_voltage {cfg.fallback_voltage} V")
+        return normalized_thrust(thrust_newton, cfg.fallback_voltage, cfg.a_f, cfg.b_f, cfg.thrust_min)
+
+    def _send_setpoint(self, now: float) -> bool:
+        sp = self._setpoint
+        if sp is None:
+            return False
+        cfg = self.config
+        thrust = self.normalized_thrust(sp.thrust_newton, now)
+        time_boot_ms = int(max(0.0, now - self.boot_time) * 1000.0)
+        msg = encode_set_attitude_target(self.link.mav, time_boot_ms, cfg.target_system, cfg.target_component,
+                                         sp.q_enu_flu, thrust)
+        if not self.link.send(msg):
+            return False
+        self.setpoints_sent += 1
+        self._sent_times.append(now)
+        return True
+
+    def setpoint_rate(self, now: float) -> float:
+        """Measured SET_ATTITUDE_TARGET output rate over the last second [Hz]."""
+        times = self._sent_times
+        while times and now - times[0] > 1.0:
+            times.popleft()
+        return float(len(times))
+
+    # ---- operator and periodic work ----------------------------------------------------------------------
+    def on_teleop(self, mode: int, now: float) -> None:
+        self.machine.on_teleop(mode, now)
+
+    def tick(self, now: float) -> list[LogEvent]:
+        """Periodic step at ``stream_rate``: state machine, setpoint repetition, commands, HEARTBEAT."""
+        decision = self.machine.step(now, self.setpoint_fresh(now))
+        if decision.stream:
+            self._send_setpoint(now)
+        cfg = self.config
+        for command in decision.commands:
+            self.link.send(self.link.mav.command_long_encode(
+                target_system=cfg.target_system, target_component=cfg.target_component,
+                command=command.command, confirmation=0,
+                param1=command.params[0], param2=command.params[1], param3=command.params[2],
+                param4=command.params[3], param5=command.params[4], param6=command.params[5],
+                param7=command.params[6]))
+            self._event("info", f"command.{command.label}", f"sent {command.label} (MAV_CMD {command.command})")
+        if now - self._last_heartbeat_sent >= cfg.heartbeat_period or now < self._last_heartbeat_sent:
+            self._last_heartbeat_sent = now
+            self.link.send(self.link.mav.heartbeat_encode(
+                type=MAV_TYPE_ONBOARD_CONTROLLER, autopilot=MAV_AUTOPILOT_INVALID, base_mode=0, custom_mode=0,
+                system_status=MAV_STATE_ACTIVE))
+        return decision.events + self.take_events()
+
+    # ---- reception -----------------------------------------------------------------------------------------
+    def handle_message(self, msg, now: float):
+        """Dispatch one accepted MAVLink message; return a telemetry sample for the node to publish, or None."""
+        if msg.get_srcSystem() != self.config.target_system:
+            return None
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER):
+                return None  # another component of the vehicle, not the autopilot
+            self.machine.on_heartbeat(msg.base_mode, msg.custom_mode, now)
+            return None
+        if kind == "COMMAND_ACK":
+            self.machine.on_command_ack(msg.command, msg.result, now)
+            return None
+        try:
+            return self.telemetry.decode(msg, now)
+        except (ValueError, TypeError, AttributeError, IndexError) as error:
+            self._event("warn", "telemetry.bad", f"dropping malformed {kind}: {error}")
+            return None
+
+    def poll(self, now: float, timeout: float = 0.0) -> list:
+        """Receive what is pending on the link (waiting up to ``timeout``); return the telemetry samples."""
+        samples = []
+        for msg in self.link.receive(timeout):
+            sample = self.handle_message(msg, now)
+            if sample is not None:
+                samples.append(sample)
+        return samples
+
+    # ---- status --------------------------------------------------------------------------------------------
+    def status(self, now: float) -> BridgeStatus:
+        machine = self.machine
+        battery = self.telemetry.battery
+        return BridgeStatus(
+            uav_id=self.config.uav_id,
+            state=int(machine.reported_state(now)),
+            connected=machine.connected(now),
+            armed=machine.armed,
+            offboard=machine.px4_mode.is_offboard,
+            failsafe=machine.failsafe,
+            px4_custom_mode=machine.custom_mode,
+            mode_name=machine.px4_mode.name if machine.custom_mode_seen else "",
+            battery_voltage=battery.voltage if battery is not None else math.nan,
+            battery_remaining=battery.remaining if battery is not None else math.nan,
+            link_age=machine.link_age(now),
+            setpoint_rate=self.setpoint_rate(now),
+            rx_garbage=self.link.counters.rx_rejected,
+            rejected_setpoints=self.rejected_setpoints,
+        )
+
+    @property
+    def state(self) -> BridgeState:
+        return self.machine.state

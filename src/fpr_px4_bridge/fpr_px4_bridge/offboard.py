@@ -1,0 +1,305 @@
+"""Arming / offboard state machine of one bridge (ROS-free, explicit time, no I/O).
+
+Inputs: the operator's mode (``TeleopCommand.mode``: IDLE, ARM, FLY, LAND, KILL), PX4 HEARTBEATs (armed flag,
+custom mode), COMMAND_ACKs, and whether a fresh setpoint exists. Output of :meth:`OffboardStateMachine.step`:
+whether to stream setpoints now, which COMMAND_LONGs to send, and log events.
+
+States (``UavStatus.STATE_*``): IDLE -> ARMING (COMPONENT_ARM_DISARM, retried) -> WARMUP (streaming; with FLY,
+after ``offboard_warmup`` >= 1 s of continuous stream: DO_SET_MODE OFFBOARD, retried until the HEARTBEAT shows
+OFFBOARD, spec px4_ros_facts.md §1.4-1.5) -> OFFBOARD. LAND -> LANDING (DO_SET_MODE AUTO.LAND until the
+HEARTBEAT shows it; IDLE once disarmed). KILL -> KILLED (forced disarm, optionally flight termination, latched
+until IDLE). FAILSAFE: in OFFBOARD the setpoints went stale (the stream stops so that PX4's own offboard-loss
+failsafe acts) or PX4 left OFFBOARD / disarmed on its own; latched until the operator changes the mode.
+DISCONNECTED is reported whenever no HEARTBEAT arrived for ``heartbeat_timeout``; the state underneath is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from fpr_px4_bridge.px4_protocol import (
+    FORCE_DISARM_MAGIC,
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_FLIGHTTERMINATION,
+    MAV_CMD_DO_SET_MODE,
+    MAV_RESULT_ACCEPTED,
+    MAV_RESULT_NAMES,
+    Px4AutoSubMode,
+    Px4MainMode,
+    Px4Mode,
+    decode_custom_mode,
+    is_armed,
+    set_mode_params,
+)
+
+__all__ = ["BridgeState", "CommandRequest", "Decision", "LogEvent", "OffboardConfig", "OffboardStateMachine",
+           "TeleopMode"]
+
+
+class BridgeState(IntEnum):
+    """Same values as ``fpr_msgs/UavStatus.STATE_*``."""
+
+    DISCONNECTED = 0
+    IDLE = 1
+    ARMING = 2
+    WARMUP = 3
+    OFFBOARD = 4
+    LANDING = 5
+    KILLED = 6
+    FAILSAFE = 7
+
+
+class TeleopMode(IntEnum):
+    """Same values as ``fpr_msgs/TeleopCommand.MODE_*``."""
+
+    IDLE = 0
+    ARM = 1
+    FLY = 2
+    LAND = 3
+    KILL = 4
+
+
+@dataclass(frozen=True)
+class OffboardConfig:
+    heartbeat_timeout: float = 1.5       #: [s] no PX4 HEARTBEAT for this long -> disconnected
+    offboard_warmup: float = 1.2         #: [s] continuous stream before DO_SET_MODE OFFBOARD (PX4 wants > 1 s)
+    command_retry_interval: float = 0.5  #: [s] between retries of an unconfirmed command
+    command_max_attempts: int = 6        #: attempts of ARM / OFFBOARD / LAND before giving up (kill never gives up)
+    kill_flight_termination: bool = False  #: also send DO_FLIGHTTERMINATION on KILL (PX4 needs a reboot after)
+
+    def __post_init__(self) -> None:
+        if self.offboard_warmup < 1.0:
+            raise ValueError("offboard_warmup must be >= 1.0 s (PX4 needs > 1 s of stream before OFFBOARD)")
+        if self.heartbeat_timeout <= 0.0 or self.command_retry_interval <= 0.0 or self.command_max_attempts < 1:
+            raise ValueError("heartbeat_timeout and command_retry_interval must be > 0, command_max_attempts >= 1")
+
+
+@dataclass(frozen=True)
+class CommandRequest:
+    """A COMMAND_LONG to send: MAV_CMD id, params 1-7, and a label for logs and ACK matching."""
+
+    command: int
+    params: tuple[float, float, float, float, float, float, float]
+    label: str
+
+
+@dataclass(frozen=True)
+class LogEvent:
+    level: str  #: "info", "warn" or "error"
+    key: str    #: for rate limiting
+    text: str
+
+
+@dataclass
+class Decision:
+    stream: bool
+    commands: list[CommandRequest] = field(default_factory=list)
+    events: list[LogEvent] = field(default_factory=list)
+
+
+def _params(*values: float) -> tuple[float, float, float, float, float, float, float]:
+    padded = list(values) + [0.0] * (7 - len(values))
+    return tuple(float(v) for v in padded)  # type: ignore[return-value]
+
+
+ARM = CommandRequest(MAV_CMD_COMPONENT_ARM_DISARM, _params(1.0), "ARM")
+DISARM = CommandRequest(MAV_CMD_COMPONENT_ARM_DISARM, _params(0.0), "DISARM")
+FORCE_DISARM = CommandRequest(MAV_CMD_COMPONENT_ARM_DISARM, _params(0.0, FORCE_DISARM_MAGIC), "FORCE_DISARM")
+SET_OFFBOARD = CommandRequest(MAV_CMD_DO_SET_MODE, _params(*set_mode_params(Px4MainMode.OFFBOARD)), "OFFBOARD")
+SET_LAND = CommandRequest(MAV_CMD_DO_SET_MODE, _params(*set_mode_params(Px4MainMode.AUTO, Px4AutoSubMode.LAND)),
+                          "AUTO.LAND")
+TERMINATE = CommandRequest(MAV_CMD_DO_FLIGHTTERMINATION, _params(1.0), "FLIGHT_TERMINATION")
+
+_STREAMING_STATES = (BridgeState.ARMING, BridgeState.WARMUP, BridgeState.OFFBOARD)
+
+
+class OffboardStateMachine:
+    """See the module docstring. Times are seconds on one clock (ROS time, simulated or wall)."""
+
+    def __init__(self, config: OffboardConfig | None = None) -> None:
+        self.config = config or OffboardConfig()
+        self.mode = TeleopMode.IDLE
+        self._state = BridgeState.IDLE
+        self._last_heartbeat: float | None = None
+        self.armed = False
+        self.px4_mode: Px4Mode = decode_custom_mode(0)
+        self.custom_mode = 0
+        self.custom_mode_seen = False  # a HEARTBEAT has been received
+        self._was_connected = False
+        self._stream_since: float | None = None
+        self._attempts: dict[str, int] = {}
+        self._last_sent: dict[str, float] = {}
+        self._events: list[LogEvent] = []
+        self._seen_offboard = False
+        self._seen_land = False
+        self.offboard_requested_at: float | None = None
+
+    # ---- inputs ----------------------------------------------------------------------------------------
+    @property
+    def state(self) -> BridgeState:
+        """Internal state (what the bridge is doing), not masked by DISCONNECTED."""
+        return self._state
+
+    def reported_state(self, now: float) -> BridgeState:
+        return self._state if self.connected(now) else BridgeState.DISCONNECTED
+
+    def connected(self, now: float) -> bool:
+        return self._last_heartbeat is not None and now - self._last_heartbeat <= self.config.heartbeat_timeout
+
+    def link_age(self, now: float) -> float:
+        return float("inf") if self._last_heartbeat is None else max(0.0, now - self._last_heartbeat)
+
+    @property
+    def failsafe(self) -> bool:
+        return self._state == BridgeState.FAILSAFE
+
+    def _event(self, level: str, key: str, text: str) -> None:
+        self._events.append(LogEvent(level, key, text))
+
+    def _enter(self, state: BridgeState, level: str, text: str) -> None:
+        if state != self._state:
+            self._event(level, f"state.{state.name}", f"{self._state.name} -> {state.name}: {text}")
+            self._state = state
+            self._attempts.clear()
+            self._last_sent.clear()
+            self._seen_offboard = False
+            self._seen_land = False
+
+    def on_heartbeat(self, base_mode: int, custom_mode: int, now: float) -> None:
+        """A HEARTBEAT from the PX4 autopilot."""
+        self._last_heartbeat = now
+        armed = is_armed(base_mode)
+        mode = decode_custom_mode(custom_mode)
+        if mode.name != self.px4_mode.name and self.custom_mode_seen:
+            self._event("info", "px4.mode", f"PX4 mode {self.px4_mode.name} -> {mode.name}")
+        if armed != self.armed and self.custom_mode_seen:
+            self._event("info", "px4.armed", "PX4 armed" if armed else "PX4 disarmed")
+        self.armed = armed
+        self.px4_mode = mode
+        self.custom_mode = int(custom_mode) & 0xFFFFFFFF
+        self.custom_mode_seen = True
+
+    def on_command_ack(self, command: int, result: int, now: float) -> None:
+        """A COMMAND_ACK: success is still judged from the HEARTBEAT (an ACK does not prove a mode change)."""
+        if result not in (MAV_RESULT_ACCEPTED, 5):  # 5: IN_PROGRESS
+            name = MAV_RESULT_NAMES.get(result, str(result))
+            self._event("warn", f"ack.{command}", f"PX4 answered command {command} with {name}")
+
+    def on_teleop(self, mode: int, now: float) -> None:
+        """The operator's mode (TeleopCommand.mode); repeated values are no-ops, unknown values are refused."""
+        try:
+            new = TeleopMode(int(mode))
+        except ValueError:
+            self._event("warn", "teleop.bad", f"ignoring unknown teleop mode {mode!r}")
+            return
+        if new == self.mode:
+            return
+        self._event("info", "teleop.mode", f"teleop mode {self.mode.name} -> {new.name}")
+        self.mode = new
+        state = self._state
+        if new == TeleopMode.KILL:
+            self._enter(BridgeState.KILLED, "warn", "KILL: forced disarm")
+        elif state == BridgeState.KILLED and new != TeleopMode.IDLE:
+            self._event("warn", "teleop.killed", f"KILLED is latched: send IDLE before {new.name}")
+        elif new == TeleopMode.IDLE:
+            self._enter(BridgeState.IDLE, "info", "IDLE: stream stopped")
+        elif new == TeleopMode.LAND:
+            if self.armed:
+                self._enter(BridgeState.LANDING, "info", "LAND requested")
+            else:
+                self._enter(BridgeState.IDLE, "info", "LAND while disarmed: nothing to land")
+        elif new in (TeleopMode.ARM, TeleopMode.FLY):
+            if state == BridgeState.OFFBOARD:
+                return  # FLY -> ARM while flying keeps flying; the operator lands or kills explicitly
+            if self.armed:
+                self._enter(BridgeState.WARMUP, "info", "armed: streaming")
+            else:
+                self._enter(BridgeState.ARMING, "info", "arming")
+
+    # ---- commands ----------------------------------------------------------------------------------------
+    def _request(self, command: CommandRequest, now: float, decision: Decision, limited: bool = True) -> bool:
+        """Queue ``command`` if its retry interval has passed; False once the attempts are exhausted."""
+        attempts = self._attempts.get(command.label, 0)
+        if limited and attempts >= self.config.command_max_attempts:
+            return False
+        last = self._last_sent.get(command.label)
+        if last is None or now - last >= self.config.command_retry_interval:
+            if not self.connected(now):
+                return True  # hold retries while PX4 is silent
+            decision.commands.append(command)
+            self._attempts[command.label] = attempts + 1
+            self._last_sent[command.label] = now
+        return True
+
+    # ---- step ----------------------------------------------------------------------------------------------
+    def step(self, now: float, setpoint_fresh: bool) -> Decision:
+        """Advance at time ``now``; ``setpoint_fresh``: a valid setpoint younger than setpoint_timeout exists."""
+        decision = Decision(stream=False)
+        connected = self.connected(now)
+        if connected != self._was_connected:
+            if connected:
+                self._event("info", "link.up", f"PX4 HEARTBEAT received: connected (mode {self.px4_mode.name})")
+            elif self._last_heartbeat is not None:
+                self._event("warn", "link.down",
+                            f"no PX4 HEARTBEAT for {self.link_age(now):.2f} s: DISCONNECTED")
+            self._was_connected = connected
+        state = self._state
+        offboard = self.px4_mode.is_offboard
+
+        if state == BridgeState.ARMING:
+            if self.armed:
+                self._enter(BridgeState.WARMUP, "info", "PX4 armed")
+            elif not self._request(ARM, now, decision):
+                self._enter(BridgeState.IDLE, "error",
+                            f"arming failed after {self.config.command_max_attempts} attempts")
+        elif state == BridgeState.WARMUP:
+            if self.custom_mode_seen and not self.armed and connected:
+                self._enter(BridgeState.IDLE, "warn", "PX4 disarmed during warm-up")
+            elif offboard and self._stream_since is not None:
+                self._enter(BridgeState.OFFBOARD, "info", "PX4 reports OFFBOARD")
+            elif (self.mode == TeleopMode.FLY and setpoint_fresh and self._stream_since is not None
+                  and now - self._stream_since >= self.config.offboard_warmup):
+                if self.offboard_requested_at is None:
+                    self.offboard_requested_at = now
+                if not self._request(SET_OFFBOARD, now, decision):
+                    self._enter(BridgeState.FAILSAFE, "error",
+                                f"PX4 did not enter OFFBOARD after {self.config.command_max_attempts} requests")
+        elif state == BridgeState.OFFBOARD:
+            if not setpoint_fresh:
+                self._enter(BridgeState.FAILSAFE, "error",
+                            "setpoints stale: stream stopped, PX4 offboard-loss failsafe takes over")
+            elif connected and not offboard:
+                self._enter(BridgeState.FAILSAFE, "error", f"PX4 left OFFBOARD on its own ({self.px4_mode.name})")
+            elif connected and not self.armed:
+                self._enter(BridgeState.FAILSAFE, "error", "PX4 disarmed in OFFBOARD")
+        elif state == BridgeState.LANDING:
+            self._seen_land = self._seen_land or self.px4_mode.is_land
+            if not self.armed and connected:
+                self._enter(BridgeState.IDLE, "info", "landed and disarmed")
+            elif not self.px4_mode.is_land and not self._request(SET_LAND, now, decision):
+                self._event("error", "land.failed", "PX4 did not enter AUTO.LAND: land it manually or KILL")
+        elif state == BridgeState.KILLED:
+            if self.armed or not connected:
+                self._request(FORCE_DISARM, now, decision, limited=False)
+                if self.config.kill_flight_termination:
+                    self._request(TERMINATE, now, decision, limited=False)
+        elif state == BridgeState.IDLE:
+            if self.armed and self.mode == TeleopMode.IDLE:
+                self._request(DISARM, now, decision)
+
+        decision.stream = self._state in _STREAMING_STATES and setpoint_fresh
+        if decision.stream:
+            if self._stream_since is None:
+                self._stream_since = now
+        else:
+            self._stream_since = None
+            if self._state not in (BridgeState.WARMUP,):
+                self.offboard_requested_at = None
+        decision.events = self._events
+        self._events = []
+        return decision
+
+    def stream_allowed(self) -> bool:
+        """True when the current state streams setpoints (freshness aside)."""
+        return self._state in _STREAMING_STATES

@@ -1,0 +1,265 @@
+"""ROS 2 node ``px4_bridge``: one UAV's MAVLink 2 link to PX4 (thin wrapper around :mod:`fpr_px4_bridge.bridge`).
+
+Run in the UAV's namespace: ``ros2 run fpr_px4_bridge px4_bridge --ros-args -r __ns:=/fpr/uav1 -p uav_id:=1``.
+Subscribes ``setpoint`` (fpr_msgs/AttitudeThrustSetpoint) and ``/fpr/teleop`` (fpr_msgs/TeleopCommand);
+publishes ``imu`` (sensor_msgs/Imu), ``velocity_body`` (geometry_msgs/TwistStamped), ``battery``
+(sensor_msgs/BatteryState) and ``status`` (fpr_msgs/UavStatus). All times come from the node clock
+(``use_sim_time`` honoured).
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import threading
+import time
+
+import rclpy
+from fpr_model.battery import thrust_coefficients
+from geometry_msgs.msg import TwistStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.time import Time
+from sensor_msgs.msg import BatteryState, Imu
+
+from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus
+from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge
+from fpr_px4_bridge.link import MavlinkLink, load_signing_key
+from fpr_px4_bridge.offboard import LogEvent, OffboardConfig
+from fpr_px4_bridge.telemetry import BatterySample, BodyVelocitySample, ImuSample
+
+_PARAMETERS = {
+    "uav_id": (1, "UAV index i (1-based): MAVLink target system by default, default UDP port 14540 + i - 1"),
+    "connection_url": ("", "udp://HOST:PORT (listen), udpout://HOST:PORT, serial:///dev/X or /dev/X; "
+                           "empty: udp://127.0.0.1:(14540 + uav_id - 1)"),
+    "baud": (921600, "serial baud rate (serial connections only)"),
+    "system_id": (0, "our MAVLink system id; 0: the same as target_system (companion-computer convention)"),
+    "component_id": (191, "our MAVLink component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)"),
+    "target_system": (0, "PX4 system id; 0: uav_id"),
+    "target_component": (1, "PX4 autopilot component id"),
+    "stream_rate": (50.0, "[Hz] SET_ATTITUDE_TARGET repetition rate of the latest setpoint (>= 50)"),
+    "setpoint_timeout": (0.25, "[s] setpoints older than this are not streamed (PX4's failsafe takes over)"),
+    "thrust_min": (0.05, "lower clamp of the normalized thrust (C.1), in [0, 1)"),
+    "a_f": (math.nan, "[N/V] max-thrust slope (C.2); NaN: thesis Table C.1 value of uav_id"),
+    "b_f": (math.nan, "[N] max-thrust offset (C.2); NaN: thesis Table C.1 value of uav_id"),
+    "fallback_voltage": (12.0, "[V] battery voltage used while PX4 reports none"),
+    "quaternion_tolerance": (1e-3, "setpoints with | |q| - 1 | above this are refused"),
+    "heartbeat_timeout": (1.5, "[s] no PX4 HEARTBEAT for this long: DISCONNECTED"),
+    "offboard_warmup": (1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)"),
+    "command_retry_interval": (0.5, "[s] between retries of unconfirmed ARM / OFFBOARD / LAND / KILL commands"),
+    "command_max_attempts": (6, "attempts of ARM / OFFBOARD / LAND before giving up (KILL retries forever)"),
+    "kill_flight_termination": (False, "KILL also sends DO_FLIGHTTERMINATION (PX4 then needs a reboot)"),
+    "signing_key_file": ("", "MAVLink 2 signing secret (64 hex digits or 32 bytes); empty: signing off"),
+    "signing_link_id": (0, "MAVLink 2 signing link id"),
+    "status_rate": (10.0, "[Hz] status publication rate"),
+    "body_frame_id": ("", "frame_id of imu and velocity_body; empty: uav<i>/base_link"),
+    "teleop_topic": ("/fpr/teleop", "TeleopCommand topic (mode: idle / arm / fly / land / kill)"),
+}
+
+
+class _EventLog:
+    """Rate-limits log lines per event key (at most one per ``interval`` s, counting the suppressed ones)."""
+
+    def __init__(self, logger, interval: float = 1.0) -> None:
+        self._logger = logger
+        self._interval = interval
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+    def emit(self, events: list[LogEvent]) -> None:
+        now = time.monotonic()
+        for event in events:
+            last = self._last.get(event.key)
+            if last is not None and now - last < self._interval and not event.key.startswith("state."):
+                self._suppressed[event.key] = self._suppressed.get(event.key, 0) + 1
+                continue
+            self._last[event.key] = now
+            skipped = self._suppressed.pop(event.key, 0)
+            text = event.text + (f" ({skipped} similar suppressed)" if skipped else "")
+            # one call site per severity: rclpy refuses a severity change at a call site
+            if event.level == "error":
+                self._logger.error(text)
+            elif event.level == "warn":
+                self._logger.warning(text)
+            else:
+                self._logger.info(text)
+
+
+class Px4BridgeNode(Node):
+    def __init__(self, **kwargs) -> None:
+        """``kwargs`` go to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides`` in tests)."""
+        super().__init__("px4_bridge", **kwargs)
+        for name, (default, description) in _PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        p = {name: self.get_parameter(name).value for name in _PARAMETERS}
+        uav_id = int(p["uav_id"])
+        defaults = thrust_coefficients(uav_id)
+        a_f = defaults.a_f if math.isnan(float(p["a_f"])) else float(p["a_f"])
+        b_f = defaults.b_f if math.isnan(float(p["b_f"])) else float(p["b_f"])
+        target_system = int(p["target_system"]) or uav_id
+        self.config = BridgeConfig(
+            uav_id=uav_id, target_system=target_system, target_component=int(p["target_component"]),
+            stream_rate=float(p["stream_rate"]), setpoint_timeout=float(p["setpoint_timeout"]),
+            thrust_min=float(p["thrust_min"]), a_f=a_f, b_f=b_f, fallback_voltage=float(p["fallback_voltage"]),
+            quaternion_tolerance=float(p["quaternion_tolerance"]),
+            offboard=OffboardConfig(
+                heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),
+                command_retry_interval=float(p["command_retry_interval"]),
+                command_max_attempts=int(p["command_max_attempts"]),
+                kill_flight_termination=bool(p["kill_flight_termination"])))
+        url = p["connection_url"] or f"udp://127.0.0.1:{14540 + uav_id - 1}"
+        key = load_signing_key(p["signing_key_file"]) if p["signing_key_file"] else None
+        self.link = MavlinkLink(url, system_id=int(p["system_id"]) or target_system,
+                                component_id=int(p["component_id"]), target_system=target_system,
+                                baud=int(p["baud"]), signing_key=key, signing_link_id=int(p["signing_link_id"]))
+        self.bridge = Px4Bridge(self.config, self.link, boot_time=self._now())
+        self.frame_id = p["body_frame_id"] or f"uav{uav_id}/base_link"
+        self._lock = threading.Lock()
+        self._log = _EventLog(self.get_logger())
+
+        best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint, best_effort)
+        self.create_subscription(TeleopCommand, p["teleop_topic"], self._on_teleop, best_effort)
+        self.imu_pub = self.create_publisher(Imu, "imu", qos_profile_sensor_data)
+        self.velocity_pub = self.create_publisher(TwistStamped, "velocity_body", qos_profile_sensor_data)
+        self.battery_pub = self.create_publisher(BatteryState, "battery", 10)
+        self.status_pub = self.create_publisher(UavStatus, "status", 10)
+        self.create_timer(1.0 / self.config.stream_rate, self._on_tick)
+        self.create_timer(1.0 / float(p["status_rate"]), self._on_status)
+
+        self._running = True
+        self._rx_thread = threading.Thread(target=self._receive_loop, name="px4_bridge_rx", daemon=True)
+        self._rx_thread.start()
+        address = self.link.local_address or self.link.spec.device
+        self.get_logger().info(
+            f"px4_bridge uav {uav_id}: {url} (bound {address}), PX4 system {target_system}, "
+            f"stream {self.config.stream_rate:.0f} Hz, signing {'on' if key else 'off'}, "
+            f"a_f={a_f} N/V b_f={b_f} N")
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ---- callbacks -----------------------------------------------------------------------------------------
+    def _on_setpoint(self, msg: AttitudeThrustSetpoint) -> None:
+        q = msg.attitude
+        with self._lock:
+            self.bridge.submit_setpoint((q.w, q.x, q.y, q.z), msg.thrust, msg.uav_id, self._now())
+            events = self.bridge.take_events()
+        self._log.emit(events)
+
+    def _on_teleop(self, msg: TeleopCommand) -> None:
+        with self._lock:
+            self.bridge.on_teleop(msg.mode, self._now())
+            events = self.bridge.take_events()
+        self._log.emit(events)
+
+    def _on_tick(self) -> None:
+        with self._lock:
+            events = self.bridge.tick(self._now())
+        self._log.emit(events)
+
+    def _on_status(self) -> None:
+        now = self.get_clock().now()
+        with self._lock:
+            s = self.bridge.status(now.nanoseconds * 1e-9)
+        msg = UavStatus()
+        msg.header.stamp = now.to_msg()
+        msg.uav_id = s.uav_id
+        msg.state = s.state
+        msg.connected = s.connected
+        msg.armed = s.armed
+        msg.offboard = s.offboard
+        msg.failsafe = s.failsafe
+        msg.px4_custom_mode = s.px4_custom_mode
+        msg.mode_name = s.mode_name
+        msg.battery_voltage = float(s.battery_voltage)
+        msg.battery_remaining = float(s.battery_remaining)
+        msg.link_age = float(s.link_age)
+        msg.setpoint_rate = float(s.setpoint_rate)
+        msg.rx_garbage = min(s.rx_garbage, 0xFFFFFFFF)
+        msg.rejected_setpoints = min(s.rejected_setpoints, 0xFFFFFFFF)
+        self.status_pub.publish(msg)
+
+    # ---- reception thread ------------------------------------------------------------------------------
+    def _receive_loop(self) -> None:
+        fileno = self.link.fileno()
+        while self._running:
+            try:
+                ready, _, _ = select.select([fileno], [], [], 0.1)
+            except (OSError, ValueError):
+                return  # socket closed at shutdown
+            if not ready or not self._running:
+                continue
+            with self._lock:
+                samples = self.bridge.poll(self._now())
+                events = self.bridge.take_events()
+            self._log.emit(events)
+            for sample in samples:
+                self._publish(sample)
+
+    def _stamp(self, seconds: float):
+        return Time(nanoseconds=max(0, int(seconds * 1e9)), clock_type=self.get_clock().clock_type).to_msg()
+
+    def _publish(self, sample) -> None:
+        if isinstance(sample, ImuSample):
+            msg = Imu()
+            msg.header.stamp = self._stamp(sample.stamp)
+            msg.header.frame_id = self.frame_id
+            q = sample.orientation
+            msg.orientation.w, msg.orientation.x, msg.orientation.y, msg.orientation.z = (float(c) for c in q)
+            w = sample.angular_velocity
+            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = (float(c) for c in w)
+            if sample.linear_acceleration is None:
+                msg.linear_acceleration_covariance[0] = -1.0  # REP-145: not provided
+            else:
+                a = sample.linear_acceleration
+                msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = (
+                    float(c) for c in a)
+            self.imu_pub.publish(msg)
+        elif isinstance(sample, BodyVelocitySample):
+            msg = TwistStamped()
+            msg.header.stamp = self._stamp(sample.stamp)
+            msg.header.frame_id = self.frame_id
+            msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(c) for c in sample.linear)
+            msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = (float(c) for c in sample.angular)
+            self.velocity_pub.publish(msg)
+        elif isinstance(sample, BatterySample):
+            msg = BatteryState()
+            msg.header.stamp = self._stamp(sample.stamp)
+            msg.header.frame_id = self.frame_id
+            msg.voltage = float(sample.voltage)
+            msg.current = -float(sample.current)  # ROS: negative while discharging
+            msg.percentage = float(sample.remaining)
+            msg.charge = msg.capacity = msg.design_capacity = math.nan
+            msg.temperature = math.nan
+            msg.present = True
+            msg.power_supply_status = BatteryState.POWER_SUPPLY_STATUS_DISCHARGING
+            msg.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_LIPO
+            self.battery_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        self._running = False
+        if self._rx_thread.is_alive():
+            self._rx_thread.join(timeout=1.0)
+        self.link.close()
+        super().destroy_node()
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = Px4BridgeNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

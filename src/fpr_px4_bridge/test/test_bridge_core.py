@@ -1,0 +1,232 @@
+"""Px4Bridge core over a real loopback socket, with explicit (synthetic) time: a synchronous fake PX4 peer."""
+
+import math
+import socket
+
+import numpy as np
+import pytest
+from fpr_model.battery import normalized_thrust
+from fpr_model.rotations import quat_from_axis_angle
+from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge
+from fpr_px4_bridge.link import MavlinkLink
+from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, TeleopMode
+from fpr_px4_bridge.telemetry import BatterySample, BodyVelocitySample, ImuSample
+
+from fpr_px4_bridge import px4_protocol as p
+
+mavlink = p.import_mavlink()
+ARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | p.MAV_MODE_FLAG_SAFETY_ARMED
+POSCTL = p.encode_custom_mode(p.Px4MainMode.POSCTL)
+Q_NORTH = quat_from_axis_angle([0.0, 0.0, 1.0], math.pi / 2)
+
+
+class Peer:
+    """Synchronous PX4 side: sends what the test says, reads what the bridge sent."""
+
+    def __init__(self, bridge_address):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.0)
+        self.address = bridge_address
+        self.mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        self.parser = mavlink.MAVLink(None)
+
+    def send(self, msg):
+        self.sock.sendto(msg.pack(self.mav), self.address)
+
+    def heartbeat(self, base_mode, custom_mode):
+        self.send(self.mav.heartbeat_encode(type=2, autopilot=12, base_mode=base_mode, custom_mode=custom_mode,
+                                            system_status=4))
+
+    def read(self):
+        out = []
+        while True:
+            try:
+                data = self.sock.recv(65535)
+            except BlockingIOError:
+                return out
+            out.append(self.parser.decode(bytearray(data)))
+
+
+@pytest.fixture
+def setup():
+    link = MavlinkLink("udp://127.0.0.1:0", system_id=1, target_system=1)
+    config = BridgeConfig(uav_id=1, setpoint_timeout=0.2, offboard=OffboardConfig(offboard_warmup=1.0))
+    bridge = Px4Bridge(config, link)
+    peer = Peer(link.local_address)
+    yield bridge, peer
+    link.close()
+    peer.sock.close()
+
+
+def connect(bridge, peer, now, base=ARMED, mode=POSCTL):
+    peer.heartbeat(base, mode)
+    assert bridge.poll(now, timeout=1.0) == []
+    assert bridge.machine.connected(now)
+
+
+def fly(bridge, peer, t0, t1, dt=0.02, setpoints=True, thrust=10.0, heartbeat=(ARMED, POSCTL)):
+    """Drive the bridge: heartbeat + setpoint + tick every dt; return [(t, message)] seen by the peer."""
+    seen = []
+    t = t0
+    while t < t1 - 1e-9:
+        peer.heartbeat(*heartbeat)
+        bridge.poll(t, timeout=0.05)
+        if setpoints:
+            bridge.submit_setpoint(Q_NORTH, thrust, 1, t)
+        bridge.tick(t)
+        seen += [(t, m) for m in peer.read()]
+        t = round(t + dt, 9)
+    return seen
+
+
+def kinds(seen, kind):
+    return [(t, m) for t, m in seen if m.get_type() == kind]
+
+
+def test_stream_rate_warmup_and_stale_stop_with_explicit_time(setup):
+    bridge, peer = setup
+    connect(bridge, peer, 0.0)
+    bridge.on_teleop(TeleopMode.FLY, 0.0)
+    seen = fly(bridge, peer, 0.0, 2.0)
+    setpoints = kinds(seen, "SET_ATTITUDE_TARGET")
+    # forwarded on receipt + repeated by the 50 Hz tick: >= 50 per second of stream
+    assert len(setpoints) / 2.0 >= 50.0
+    assert bridge.setpoint_rate(2.0) >= 50.0
+    first = setpoints[0][0]
+    requests = [t for t, m in kinds(seen, "COMMAND_LONG") if m.command == p.MAV_CMD_DO_SET_MODE]
+    assert requests and requests[0] - first >= 1.0
+    assert requests[0] - first <= 1.0 + 0.02 + 1e-9
+    # PX4 reports OFFBOARD: the bridge follows
+    seen = fly(bridge, peer, 2.0, 2.5, heartbeat=(ARMED, p.CUSTOM_MODE_OFFBOARD))
+    assert bridge.state == BridgeState.OFFBOARD
+    # setpoints stop arriving at t = 2.5: the stream stops within setpoint_timeout + one period
+    seen = fly(bridge, peer, 2.5, 3.5, setpoints=False, heartbeat=(ARMED, p.CUSTOM_MODE_OFFBOARD))
+    last = max(t for t, _ in kinds(seen, "SET_ATTITUDE_TARGET"))
+    assert last <= 2.48 + 0.2 + 0.02 + 1e-9
+    assert bridge.state == BridgeState.FAILSAFE and bridge.status(3.5).failsafe
+
+
+def test_wire_content_is_ned_frd_attitude_and_battery_normalized_thrust(setup):
+    bridge, peer = setup
+    connect(bridge, peer, 0.0)
+    peer.send(peer.mav.sys_status_encode(
+        onboard_control_sensors_present=0, onboard_control_sensors_enabled=0, onboard_control_sensors_health=0,
+        load=0, voltage_battery=11100, current_battery=-1, battery_remaining=-1, drop_rate_comm=0, errors_comm=0,
+        errors_count1=0, errors_count2=0, errors_count3=0, errors_count4=0))
+    samples = bridge.poll(0.01, timeout=1.0)
+    assert isinstance(samples[0], BatterySample) and samples[0].voltage == pytest.approx(11.1)
+    assert math.isnan(samples[0].current) and math.isnan(samples[0].remaining)
+    bridge.on_teleop(TeleopMode.ARM, 0.02)
+    bridge.tick(0.02)
+    result = bridge.submit_setpoint(Q_NORTH, 12.0, 1, 0.03)
+    assert result.accepted and result.sent
+    msgs = kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")
+    m = msgs[-1][1]
+    np.testing.assert_allclose(m.q, [1.0, 0.0, 0.0, 0.0], atol=1e-7)  # level, facing north
+    assert m.type_mask == 7 and (m.target_system, m.target_component) == (1, 1)
+    assert m.thrust == pytest.approx(normalized_thrust(12.0, 11.1, 8.02, -61.66, 0.05), abs=1e-6)
+    assert m.thrust == pytest.approx(12.0 / 27.362, abs=1e-6)
+    # thrust clamping to [thrust_min, 1]
+    assert bridge.normalized_thrust(0.0, 0.04) == pytest.approx(0.05)
+    assert bridge.normalized_thrust(500.0, 0.04) == 1.0
+    # without a (recent) voltage the fallback voltage is used
+    assert bridge.normalized_thrust(12.0, 100.0) == pytest.approx(12.0 / (8.02 * 12.0 - 61.66))
+
+
+@pytest.mark.parametrize(
+    "q, thrust, uav_id",
+    [
+        ([math.nan, 0.0, 0.0, 1.0], 10.0, 1),
+        ([1.0, 0.0, math.inf, 0.0], 10.0, 1),
+        ([0.5, 0.0, 0.0, 0.5], 10.0, 1),       # non-unit
+        ([2.0, 0.0, 0.0, 0.0], 10.0, 1),       # non-unit
+        ([1.0, 0.0, 0.0, 0.0], math.nan, 1),
+        ([1.0, 0.0, 0.0, 0.0], math.inf, 1),
+        ([1.0, 0.0, 0.0, 0.0], -1.0, 1),
+        ([1.0, 0.0, 0.0, 0.0], 10.0, 2),       # another UAV's setpoint
+    ],
+)
+def test_bad_setpoints_are_refused_with_a_warning_and_never_forwarded(setup, q, thrust, uav_id):
+    bridge, peer = setup
+    connect(bridge, peer, 0.0)
+    bridge.on_teleop(TeleopMode.ARM, 0.0)
+    bridge.tick(0.0)
+    peer.read()
+    result = bridge.submit_setpoint(q, thrust, uav_id, 0.01)
+    assert not result.accepted and not result.sent
+    events = bridge.take_events()
+    assert any(e.level == "warn" and e.key == "setpoint.refused" for e in events)
+    for t in (0.02, 0.04, 0.06):
+        bridge.tick(t)
+    assert kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET") == []
+    assert bridge.status(0.06).rejected_setpoints == 1
+    # a good setpoint after a bad one is streamed; the bad one never replaced it
+    bridge.submit_setpoint(Q_NORTH, 10.0, 1, 0.07)
+    bridge.submit_setpoint(q, thrust, uav_id, 0.08)
+    bridge.tick(0.08)
+    for _, m in kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET"):
+        assert np.isfinite(m.q).all() and np.isfinite(m.thrust)
+        np.testing.assert_allclose(m.q, [1.0, 0.0, 0.0, 0.0], atol=1e-7)
+
+
+def test_fuzz_10000_datagrams_into_the_bridge_socket_while_streaming(setup, corrupt_datagrams):
+    bridge, peer = setup
+    connect(bridge, peer, 0.0)
+    bridge.on_teleop(TeleopMode.ARM, 0.0)
+    fuzzer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    fuzzer.bind(("127.0.0.1", 0))
+    t = 0.0
+    sent_before = bridge.setpoints_sent
+    datagrams = list(corrupt_datagrams(10_000, seed=11))
+    try:
+        for i in range(0, len(datagrams), 100):
+            for data in datagrams[i:i + 100]:
+                fuzzer.sendto(data, bridge.link.local_address)
+            peer.heartbeat(ARMED, POSCTL)
+            bridge.poll(t, timeout=0.05)
+            bridge.submit_setpoint(Q_NORTH, 10.0, 1, t)
+            bridge.tick(t)
+            t = round(t + 0.02, 9)
+        while bridge.poll(t, timeout=0.05):
+            pass
+    finally:
+        fuzzer.close()
+    c = bridge.link.counters
+    assert c.rx_datagrams >= 10_000 + 100
+    assert bridge.status(t).rx_garbage == c.rx_rejected > 7_000
+    assert bridge.setpoints_sent - sent_before >= 2 * 100  # forwarded + repeated, every cycle
+    assert kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")
+    # fuzzed frames from system 1 may look like a PX4; the peer must still be a real address, and the link alive
+    assert bridge.machine.connected(t) and bridge.link.peer == peer.sock.getsockname()
+
+
+def test_telemetry_is_converted_to_enu_flu(setup):
+    bridge, peer = setup
+    q_ned = [math.cos(0.3), 0.0, 0.0, math.sin(0.3)]  # yaw 0.6 rad in NED
+    peer.send(peer.mav.highres_imu_encode(time_usec=999_000, xacc=0.5, yacc=0.25, zacc=-9.81, xgyro=0.0,
+                                          ygyro=0.0, zgyro=0.0, xmag=0.0, ymag=0.0, zmag=0.0, abs_pressure=0.0,
+                                          diff_pressure=0.0, pressure_alt=0.0, temperature=0.0,
+                                          fields_updated=0))
+    peer.send(peer.mav.attitude_quaternion_encode(time_boot_ms=1000, q1=q_ned[0], q2=q_ned[1], q3=q_ned[2],
+                                                  q4=q_ned[3], rollspeed=0.1, pitchspeed=-0.2, yawspeed=0.3))
+    peer.send(peer.mav.odometry_encode(time_usec=1_000_000, frame_id=1, child_frame_id=12, x=0.0, y=0.0, z=0.0,
+                                       q=q_ned, vx=1.0, vy=2.0, vz=-0.5, rollspeed=0.1, pitchspeed=-0.2,
+                                       yawspeed=0.3, pose_covariance=[0.0] * 21, velocity_covariance=[0.0] * 21))
+    peer.send(peer.mav.local_position_ned_encode(time_boot_ms=1000, x=0.0, y=0.0, z=0.0, vx=1.0, vy=0.0, vz=0.0))
+    samples = []
+    for _ in range(20):
+        samples += bridge.poll(5.0, timeout=0.2)
+        if len(samples) >= 3:
+            break
+    imu = next(s for s in samples if isinstance(s, ImuSample))
+    yaw_enu = math.pi / 2 - 0.6
+    np.testing.assert_allclose(imu.orientation, [math.cos(yaw_enu / 2), 0.0, 0.0, math.sin(yaw_enu / 2)],
+                               atol=1e-6)
+    np.testing.assert_allclose(imu.angular_velocity, [0.1, 0.2, -0.3], atol=1e-6)
+    np.testing.assert_allclose(imu.linear_acceleration, [0.5, -0.25, 9.81], atol=1e-6)
+    assert imu.stamp == pytest.approx(5.0)
+    odo, local = [s for s in samples if isinstance(s, BodyVelocitySample)]
+    np.testing.assert_allclose(odo.linear, [1.0, -2.0, 0.5], atol=1e-6)
+    # NED north velocity seen from a body yawed 0.6 rad (NED) to the right of north: FLU (cos, +sin... left<0)
+    np.testing.assert_allclose(local.linear, [math.cos(0.6), math.sin(0.6), 0.0], atol=1e-6)

@@ -1,0 +1,178 @@
+"""Offboard state machine with explicit time (no I/O, no sleeping)."""
+
+import pytest
+from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, OffboardStateMachine, TeleopMode
+
+from fpr_px4_bridge import px4_protocol as p
+
+ARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | p.MAV_MODE_FLAG_SAFETY_ARMED
+DISARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+POSCTL = p.encode_custom_mode(p.Px4MainMode.POSCTL)
+
+
+def labels(decision):
+    return [c.label for c in decision.commands]
+
+
+def run(machine, t0, t1, fresh=True, base=None, mode=POSCTL, dt=0.02):
+    """Step from t0 to t1 (exclusive) with HEARTBEATs every step; return [(t, decision)]."""
+    out = []
+    t = t0
+    while t < t1 - 1e-9:
+        if base is not None:
+            machine.on_heartbeat(base, mode, t)
+        out.append((t, machine.step(t, fresh)))
+        t = round(t + dt, 9)
+    return out
+
+
+def test_starts_disconnected_then_idle_on_heartbeat():
+    m = OffboardStateMachine()
+    assert m.reported_state(0.0) == BridgeState.DISCONNECTED
+    m.on_heartbeat(DISARMED, POSCTL, 0.0)
+    d = m.step(0.0, True)
+    assert m.reported_state(0.0) == BridgeState.IDLE and not d.stream and not d.commands
+    assert any(e.key == "link.up" for e in d.events)
+    # heartbeat_timeout 1.5 s -> DISCONNECTED with a warning
+    d = m.step(1.6, True)
+    assert m.reported_state(1.6) == BridgeState.DISCONNECTED
+    assert any(e.level == "warn" and e.key == "link.down" for e in d.events)
+    assert m.link_age(1.6) == pytest.approx(1.6)
+
+
+def test_fly_sequence_arm_warmup_then_offboard_only_after_one_second_of_stream():
+    m = OffboardStateMachine(OffboardConfig(offboard_warmup=1.0))
+    m.on_heartbeat(DISARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.FLY, 0.0)
+    assert m.state == BridgeState.ARMING
+    d = m.step(0.0, True)
+    assert labels(d) == ["ARM"] and d.stream  # arming streams already
+    # ARM is retried every 0.5 s until the heartbeat says armed
+    steps = run(m, 0.02, 0.6, base=DISARMED)
+    assert sum(labels(d).count("ARM") for _, d in steps) == 1
+    m.on_heartbeat(ARMED, POSCTL, 0.6)
+    m.step(0.6, True)
+    assert m.state == BridgeState.WARMUP
+    steps = run(m, 0.62, 3.0, base=ARMED)
+    requests = [t for t, d in steps if "OFFBOARD" in labels(d)]
+    assert requests, "OFFBOARD never requested"
+    # the stream has run continuously since t = 0.0 (ARMING streams)
+    assert requests[0] >= 1.0
+    assert all(d.stream for _, d in steps)
+    # PX4 switches: OFFBOARD state
+    m.on_heartbeat(ARMED, p.CUSTOM_MODE_OFFBOARD, 3.0)
+    m.step(3.0, True)
+    assert m.state == BridgeState.OFFBOARD and m.px4_mode.is_offboard
+
+
+def test_warmup_timer_restarts_when_setpoints_go_stale():
+    m = OffboardStateMachine(OffboardConfig(offboard_warmup=1.0))
+    m.on_heartbeat(ARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.FLY, 0.0)
+    assert m.state == BridgeState.WARMUP
+    run(m, 0.0, 0.8, base=ARMED)
+    stale = run(m, 0.8, 1.0, fresh=False, base=ARMED)
+    assert not any(d.stream for _, d in stale)
+    steps = run(m, 1.0, 2.5, base=ARMED)
+    requests = [t for t, d in steps if "OFFBOARD" in labels(d)]
+    assert requests[0] >= 2.0 - 1e-9
+
+
+def _flying():
+    m = OffboardStateMachine(OffboardConfig(offboard_warmup=1.0))
+    m.on_heartbeat(ARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.FLY, 0.0)
+    run(m, 0.0, 1.2, base=ARMED)
+    m.on_heartbeat(ARMED, p.CUSTOM_MODE_OFFBOARD, 1.2)
+    m.step(1.2, True)
+    assert m.state == BridgeState.OFFBOARD
+    return m
+
+
+def test_stale_setpoints_in_offboard_stop_the_stream_and_latch_failsafe():
+    m = _flying()
+    d = m.step(1.3, False)
+    assert not d.stream and m.state == BridgeState.FAILSAFE and m.failsafe
+    assert any(e.level == "error" for e in d.events)
+    # fresh setpoints again do not restart the stream while the operator keeps FLY
+    assert not m.step(1.4, True).stream
+    # a new FLY cycle needs a mode change
+    m.on_teleop(TeleopMode.ARM, 1.5)
+    assert m.state == BridgeState.WARMUP
+
+
+def test_px4_leaving_offboard_or_disarming_is_failsafe():
+    m = _flying()
+    m.on_heartbeat(ARMED, p.encode_custom_mode(p.Px4MainMode.AUTO, p.Px4AutoSubMode.LOITER), 1.3)
+    m.step(1.3, True)
+    assert m.state == BridgeState.FAILSAFE
+    m = _flying()
+    m.on_heartbeat(DISARMED, p.CUSTOM_MODE_OFFBOARD, 1.3)
+    m.step(1.3, True)
+    assert m.state == BridgeState.FAILSAFE
+
+
+def test_land_requests_auto_land_until_px4_confirms_then_idle_after_disarm():
+    m = _flying()
+    m.on_teleop(TeleopMode.LAND, 1.3)
+    d = m.step(1.3, True)
+    assert m.state == BridgeState.LANDING and labels(d) == ["AUTO.LAND"] and not d.stream
+    cmd = d.commands[0]
+    assert cmd.command == p.MAV_CMD_DO_SET_MODE and cmd.params[:3] == (1.0, 4.0, 6.0)
+    m.on_heartbeat(ARMED, p.CUSTOM_MODE_AUTO_LAND, 1.4)
+    assert not m.step(2.0, True).commands
+    m.on_heartbeat(DISARMED, p.CUSTOM_MODE_AUTO_LAND, 5.0)
+    m.step(5.0, True)
+    assert m.state == BridgeState.IDLE
+
+
+def test_kill_forces_disarm_until_disarmed_and_is_latched():
+    m = _flying()
+    m.on_teleop(TeleopMode.KILL, 1.3)
+    d = m.step(1.3, True)
+    assert not d.stream and m.state == BridgeState.KILLED
+    assert labels(d) == ["FORCE_DISARM"]
+    assert d.commands[0].params[:2] == (0.0, p.FORCE_DISARM_MAGIC)
+    # retried without limit while PX4 still reports armed
+    steps = run(m, 1.32, 6.0, base=ARMED)
+    assert sum(labels(d).count("FORCE_DISARM") for _, d in steps) >= 9
+    m.on_teleop(TeleopMode.FLY, 6.0)
+    assert m.state == BridgeState.KILLED  # latched
+    m.on_heartbeat(DISARMED, POSCTL, 6.1)
+    assert not m.step(6.1, True).commands
+    m.on_teleop(TeleopMode.IDLE, 6.2)
+    assert m.state == BridgeState.IDLE
+
+
+def test_kill_with_flight_termination():
+    m = OffboardStateMachine(OffboardConfig(kill_flight_termination=True))
+    m.on_heartbeat(ARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.KILL, 0.0)
+    assert labels(m.step(0.0, True)) == ["FORCE_DISARM", "FLIGHT_TERMINATION"]
+
+
+def test_arming_gives_up_after_max_attempts_and_acks_are_logged():
+    m = OffboardStateMachine(OffboardConfig(command_max_attempts=3))
+    m.on_heartbeat(DISARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.ARM, 0.0)
+    m.on_command_ack(p.MAV_CMD_COMPONENT_ARM_DISARM, 2, 0.1)
+    steps = run(m, 0.0, 3.0, base=DISARMED)
+    assert sum(labels(d).count("ARM") for _, d in steps) == 3
+    assert m.state == BridgeState.IDLE
+    events = [e for _, d in steps for e in d.events]
+    assert any("DENIED" in e.text for e in events)
+    assert any(e.level == "error" and "arming failed" in e.text for e in events)
+
+
+def test_commands_are_held_while_disconnected_and_bad_teleop_modes_ignored():
+    m = OffboardStateMachine()
+    m.on_teleop(TeleopMode.ARM, 0.0)
+    assert not m.step(0.0, True).commands  # no heartbeat yet: nothing sent, nothing wasted
+    m.on_teleop(99, 0.1)
+    d = m.step(0.1, True)
+    assert m.mode == TeleopMode.ARM and any(e.key == "teleop.bad" for e in d.events)
+
+
+def test_config_refuses_short_warmup():
+    with pytest.raises(ValueError):
+        OffboardConfig(offboard_warmup=0.5)

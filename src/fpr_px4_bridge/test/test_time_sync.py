@@ -1,0 +1,31 @@
+"""BootTimeMapper: time_boot_ms -> local clock."""
+
+import numpy as np
+import pytest
+from fpr_px4_bridge.time_sync import BootTimeMapper
+
+
+def test_offset_is_the_least_delayed_sample_and_follows_reboots():
+    rng = np.random.default_rng(3)
+    mapper = BootTimeMapper(window=50)
+    assert mapper.to_local(1.0, fallback=7.0) == 7.0
+    offset = 1000.0
+    for k in range(200):
+        boot = 0.02 * k
+        mapper.update(boot, boot + offset + 0.001 + rng.exponential(0.003))
+    assert mapper.to_local(10.0, 0.0) == pytest.approx(10.0 + offset + 0.001, abs=1e-3)
+    # PX4 reboot: boot time restarts from 0, the offset is re-estimated
+    mapper.update(0.0, 2000.0)
+    assert mapper.resets == 1 and mapper.offset == pytest.approx(2000.0)
+    # the local clock jumps back (simulation restart)
+    mapper.update(0.5, 10.0)
+    assert mapper.resets == 2 and mapper.offset == pytest.approx(9.5)
+
+
+def test_window_lets_the_offset_drift_upwards():
+    mapper = BootTimeMapper(window=10)
+    for k in range(100):
+        mapper.update(float(k), float(k) + 1.0 + 0.001 * k)  # receiver clock runs 0.1 % fast
+    assert mapper.offset == pytest.approx(1.0 + 0.001 * 90, abs=1e-9)
+    with pytest.raises(ValueError):
+        BootTimeMapper(window=0)
