@@ -23,7 +23,8 @@ def as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
 
 
 def as_trailing(name: str, value, trailing: tuple[int, ...]) -> np.ndarray:
-    """Return ``value`` as a float array whose last dimensions are ``trailing`` (leading batch dims allowed)."""
+    """Return ``value`` as a float array whose last dimensions are ``trailing`` (leading batch dims
+    allowed)."""
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as error:

@@ -5,7 +5,8 @@ Equation of motion (2.26), with the external wrench of the paper (spec §1.3)::
     M(q) ν̇ + C(q, ν) ν + g(q) = τ + τ_e,        τ = J(q)ᵀ f  (2.28)
 
 - ``q = [p_p (world, m), q_p ([w,x,y,z], Fp -> world), θ (rad)]`` ∈ R^{7+n};
-  ``ν = [v_p (world, m/s), ω_p (Fp, rad/s), θ̇ (rad/s)]`` ∈ R^{6+n}; ``ν̇`` likewise (a_p in world, ω̇_p in Fp).
+  ``ν = [v_p (world, m/s), ω_p (Fp, rad/s), θ̇ (rad/s)]`` ∈ R^{6+n}; ``ν̇`` likewise (a_p in world, ω̇_p in
+  Fp).
 - Wrench layout everywhere: ``[f_p (world, N), m_p (Fp, about P, N·m), leg joint moments (N·m)]`` (2.27).
 - ``f = [f_1; ...; f_n]``: quadrotor thrust vectors, world frame, N.
 
@@ -14,11 +15,12 @@ Algorithms (Pinocchio-style free functions on the immutable :class:`~fpr_model.p
 - :func:`inverse_dynamics`: recursive Newton-Euler in Khalil's 3-D form, the thesis's own algorithm
   (2.33)-(2.45), gravity as a fictitious platform acceleration (2.39).
 - :func:`mass_matrix`: composite-rigid-body algorithm (2.51)-(2.63), evaluated in closed form in Fp at P.
-- :func:`coriolis_matrix`: ``C = Σ_k J_kᵀ (I_k J̇_k + B_k J_k)`` over the bodies k (platform, legs), with J_k the
-  body Jacobians in body coordinates (Featherstone spatial vectors ``[ω; v]``), I_k the constant body spatial
-  inertias and ``B_k = (I_k V_k) ×̄*`` (2.69)-(2.70), a skew-symmetric factorisation of ``V_k ×* I_k V_k``.
-  Hence ``C ν`` is the exact velocity-product term and ``Ṁ = C + Cᵀ`` (2.65) holds exactly. This is a valid
-  (admissible, [Echeandia 2021]) choice; it is not term-by-term the (2.68) factorisation of the thesis.
+- :func:`coriolis_matrix`: ``C = Σ_k J_kᵀ (I_k J̇_k + B_k J_k)`` over the bodies k (platform, legs),
+  with J_k the body Jacobians in body coordinates (Featherstone spatial vectors ``[ω; v]``), I_k the
+  constant body spatial inertias and ``B_k = (I_k V_k) ×̄*`` (2.69)-(2.70), a skew-symmetric factorisation
+  of ``V_k ×* I_k V_k``. Hence ``C ν`` is the exact velocity-product term and ``Ṁ = C + Cᵀ`` (2.65)
+  holds exactly. This is a valid (admissible, [Echeandia 2021]) choice; it is not term-by-term the (2.68)
+  factorisation of the thesis.
 - :func:`gravity`: static model (2.86)-(2.91) with erratum E2 (spec §2.2.4).
 
 Inertia reference points: see :mod:`fpr_model.parameters` (I_l about A_i, I_p about P).
@@ -32,7 +34,12 @@ import numpy as np
 
 from fpr_model._math import cross, skew_batch
 from fpr_model._validation import as_array, as_scalar
-from fpr_model.geometry import ParsedConfiguration, _parse_configuration, integrate_configuration, model_constants
+from fpr_model.geometry import (
+    ParsedConfiguration,
+    _parse_configuration,
+    integrate_configuration,
+    model_constants,
+)
 from fpr_model.kinematics import SingularConfigurationError, _jacobian_from
 from fpr_model.parameters import FprParameters
 
@@ -77,7 +84,8 @@ def _rnea_reference(params: FprParameters, parsed: ParsedConfiguration, nu: np.n
     # Platform Newton-Euler (2.43), about P in Fp.
     hp = c.platform_first_moment
     force = params.platform_mass * pa + cross(omega_dot, hp) + cross(omega, cross(omega, hp))
-    moment = params.platform_inertia @ omega_dot + cross(hp, pa) + cross(omega, params.platform_inertia @ omega)
+    inertia_p = params.platform_inertia
+    moment = inertia_p @ omega_dot + cross(hp, pa) + cross(omega, inertia_p @ omega)
     # Forward recursion to the legs (2.33)-(2.34), in F_li.
     a = c.anchors
     omega_in_leg = np.einsum("nji,j->ni", Rl, omega)  # pR_liᵀ ω
@@ -126,7 +134,8 @@ def _body_constants(params: FprParameters) -> _BodyConstants:
     return cached
 
 
-def _body_inertias_in_platform(params: FprParameters, parsed: ParsedConfiguration) -> tuple[np.ndarray, np.ndarray]:
+def _body_inertias_in_platform(params: FprParameters,
+                               parsed: ParsedConfiguration) -> tuple[np.ndarray, np.ndarray]:
     """First moments (n+1, 3) and rotational inertias (n+1, 3, 3) of the platform (about P) and of the
     composite legs (about A_i), all in Fp coordinates: ``pR_li ms_i`` and ``pR_li I_i pR_liᵀ``."""
     c = model_constants(params)
@@ -216,33 +225,35 @@ def mass_matrix_rnea(params: FprParameters, q) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------
 # Composite-rigid-body algorithm (thesis §2.5.3)
 # --------------------------------------------------------------------------------------------------------
-def _mass_matrix(params: FprParameters, parsed: ParsedConfiguration) -> np.ndarray:
+def _mass_matrix(params: FprParameters, parsed: ParsedConfiguration,
+                 body_terms: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     c = model_constants(params)
+    b = _body_constants(params)
     n = c.n
     R = parsed.rotation
-    Rl = parsed.leg_rotations
-    a = c.anchors
-    h_leg = np.einsum("nij,nj->ni", Rl, c.leg_first_moments)  # leg first moments about A_i, in Fp
-    inertia_leg = Rl @ c.leg_inertias @ np.swapaxes(Rl, 1, 2)  # leg inertias about A_i, in Fp
+    first, inertia = body_terms if body_terms is not None else _body_inertias_in_platform(params, parsed)
+    a = b.origins  # (n+1, 3), zero for the platform
     # Composite platform inertia about P in Fp (2.53), (2.59): parallel-axis shift of each leg from A_i to P,
     # I_P = I_A + m([a]xᵀ[a]x) + [a]xᵀ[h]x + [h]xᵀ[a]x, with [x]xᵀ[y]x = (x·y) 1 − y xᵀ.
-    ah = np.einsum("ij,ij->", a, h_leg)
-    ha = h_leg.T @ a
-    inertia_c = (params.platform_inertia + inertia_leg.sum(axis=0) + c.anchor_shift_inertia
-                 + 2.0 * ah * np.eye(3) - ha - ha.T)
-    first_moment_c = c.static_first_moment + h_leg.sum(axis=0)
+    ha = first.T @ a
+    inertia_c = inertia.sum(axis=0) + c.anchor_shift_inertia - ha - ha.T
+    trace = 2.0 * (ha[0, 0] + ha[1, 1] + ha[2, 2])
+    inertia_c[0, 0] += trace
+    inertia_c[1, 1] += trace
+    inertia_c[2, 2] += trace
+    hx, hy, hz = (c.static_first_moment + first[1:].sum(axis=0)).tolist()
     M = np.empty((6 + n, 6 + n))
     # Platform block S_pᵀ I_C S_p (2.63) with S_p = [[0, 1], [R_pᵀ, 0]] (2.61).
     M[:3, :3] = c.total_mass * np.eye(3)
-    M_omega_v = skew_batch(first_moment_c) @ R.T
+    M_omega_v = np.array([[0.0, -hz, hy], [hz, 0.0, -hx], [-hy, hx, 0.0]]) @ R.T
     M[3:6, :3] = M_omega_v
     M[:3, 3:6] = M_omega_v.T
     M[3:6, 3:6] = inertia_c
     # Leg columns S_pᵀ pX*_i I_i S_i (2.63): momentum of leg i per unit θ̇_i, moved to P.
-    angular = np.einsum("nij,nj->ni", Rl, c.leg_inertia_z)  # pR_li I_i e_z
-    linear = cross(c.joint_axes, h_leg)  # k_i × h_i
+    angular = np.einsum("nij,nj->ni", inertia[1:], c.joint_axes)  # pR_li I_i e_z
+    linear = cross(c.joint_axes, first[1:])  # k_i × h_i
     M[:3, 6:] = R @ linear.T
-    M[3:6, 6:] = (angular + cross(a, linear)).T
+    M[3:6, 6:] = (angular + cross(c.anchors, linear)).T
     M[6:, :6] = M[:6, 6:].T
     M[6:, 6:] = np.diag(c.leg_inertias[:, 2, 2])
     return M
@@ -268,7 +279,8 @@ _JOINT_CROSS.setflags(write=False)
 
 
 def _body_jacobians(params: FprParameters, parsed: ParsedConfiguration, nu: np.ndarray):
-    """Body Jacobians Ψ_k (w.r.t. [v_p, ω_p]) and their derivatives, for k = platform, legs; spatial [ω; v]."""
+    """Body Jacobians Ψ_k (w.r.t. [v_p, ω_p]) and their derivatives, for k = platform, legs; spatial [ω;
+    v]."""
     c = model_constants(params)
     n = c.n
     template = params._cache.get("body_jacobian_template")
@@ -323,9 +335,11 @@ def _coriolis_matrix(params: FprParameters, parsed: ParsedConfiguration, nu: np.
 
 
 def coriolis_matrix(params: FprParameters, q, nu) -> np.ndarray:
-    """Coriolis matrix C(q, ν) ∈ R^{(6+n)×(6+n)} with ``C ν`` = velocity-product forces and ``Ṁ = C + Cᵀ`` (2.65).
+    """Coriolis matrix C(q, ν) ∈ R^{(6+n)×(6+n)} with ``C ν`` = velocity-product forces and ``Ṁ = C + Cᵀ``
+    (2.65).
 
-    ``C = Σ_k J_kᵀ (I_k J̇_k + B_k(V_k) J_k)`` over the platform and the legs (spatial vectors ``[ω; v]`` in each
+    ``C = Σ_k J_kᵀ (I_k J̇_k + B_k(V_k) J_k)`` over the platform and the legs (spatial vectors ``[ω; v]``
+    in each
     body frame at its origin, (2.46)-(2.50)), with ``J_p = [S_p, 0]``, ``J̇_p = [Ṡ_p, 0]`` (2.61), (2.82),
     ``J_i = [X_i S_p, S_i e_iᵀ]`` (2.60), (2.62), ``J̇_i = [Ẋ_i S_p + X_i Ṡ_p, 0]`` and
     ``B_k = (I_k V_k) ×̄*`` (2.69)-(2.70). Since every I_k is constant in its body frame,
@@ -389,7 +403,8 @@ def actuation_wrench(params: FprParameters, q, thrusts) -> np.ndarray:
 def thrusts_from_wrench(params: FprParameters, q, tau) -> np.ndarray:
     """Quadrotor thrust vectors ``f = J^{-T} τ`` (thesis (3.32)), shape (n, 3), world frame, N.
 
-    For n > 3 the minimum-norm solution ``f = (Jᵀ)^† τ = J (JᵀJ)^{-1} τ``. Raises SingularConfigurationError if
+    For n > 3 the minimum-norm solution ``f = (Jᵀ)^† τ = J (JᵀJ)^{-1} τ``. Raises
+    SingularConfigurationError if
     ``cond(J)`` exceeds :data:`fpr_model.kinematics.CONDITION_LIMIT` (leg angles are not range-checked here).
     """
     from fpr_model.kinematics import CONDITION_LIMIT
@@ -411,13 +426,16 @@ def thrusts_from_wrench(params: FprParameters, q, tau) -> np.ndarray:
 # Forward dynamics, energies, integration
 # --------------------------------------------------------------------------------------------------------
 def _forward_dynamics(params, parsed, nu, tau_total, gravity_on: bool) -> np.ndarray:
-    M = _mass_matrix(params, parsed)
-    bias = _rnea(params, parsed, nu, np.zeros_like(nu), gravity_on)
+    body_terms = _body_inertias_in_platform(params, parsed)
+    M = _mass_matrix(params, parsed, body_terms)
+    bias = _rnea(params, parsed, nu, np.zeros_like(nu), gravity_on, body_terms)
     return np.linalg.solve(M, tau_total - bias)
 
 
-def forward_dynamics(params: FprParameters, q, nu, tau, external_wrench=None, gravity: bool = True) -> np.ndarray:
-    """Generalised acceleration ``ν̇ = M^{-1} (τ + τ_e − C ν − g)`` (2.26), (6+n,) [a_p (world), ω̇_p (Fp), θ̈].
+def forward_dynamics(params: FprParameters, q, nu, tau, external_wrench=None,
+                     gravity: bool = True) -> np.ndarray:
+    """Generalised acceleration ``ν̇ = M^{-1} (τ + τ_e − C ν − g)`` (2.26), (6+n,) [a_p (world), ω̇_p (Fp),
+    θ̈].
 
     ``τ``, ``external_wrench`` τ_e: (6+n,) wrenches ``[f (world, N), m (Fp, N·m), joint moments]``.
     ``C ν + g`` is evaluated by RNEA with ν̇ = 0, M by CRBA; ``gravity=False`` drops g.
@@ -438,7 +456,10 @@ def kinetic_energy(params: FprParameters, q, nu) -> float:
 
 
 def potential_energy(params: FprParameters, q) -> float:
-    """U = Σ_k m_k g z_k = g (m_tot p_z + e_zᵀ R_p h_total) [J], zero at p_z = 0 with the first moment level."""
+    """Potential energy U = Σ_k m_k g z_k = g (m_tot p_z + e_zᵀ R_p h_total) [J] (z_k: CoM heights, world).
+
+    ``h_total`` is the first moment of the whole robot about P in Fp; U = 0 when P and the CoM are at z = 0.
+    """
     parsed = _parse_configuration(params, q)
     c = model_constants(params)
     return params.gravity * (c.total_mass * parsed.position[2]
@@ -449,7 +470,8 @@ def rk4_step(params: FprParameters, q, nu, tau, dt, external_wrench=None,
              gravity: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """One fixed-step classical RK4 step of the forward dynamics, τ and τ_e held constant; returns (q, ν).
 
-    The state is integrated in its embedding: ``ṗ_p = v_p``, ``q̇_p = ½ q_p ∘ [0; ω_p]`` (A.84), ``θ̇``, ``ν̇`` from
+    The state is integrated in its embedding: ``ṗ_p = v_p``, ``q̇_p = ½ q_p ∘ [0; ω_p]`` (A.84), ``θ̇``,
+    ``ν̇`` from
     :func:`forward_dynamics`; the quaternion is re-normalised at the end of the step (4th order overall).
     ``dt`` in s.
     """

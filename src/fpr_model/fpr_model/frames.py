@@ -85,7 +85,8 @@ def quat_enu_flu_to_ned_frd(q) -> np.ndarray:
 
 
 def quat_ned_frd_to_enu_flu(q) -> np.ndarray:
-    """Attitude FRD->NED (PX4) to FLU->ENU (ROS): ``q_NE^{-1} ∘ q ∘ q_x(π)^{-1}``, returned with ``w >= 0``."""
+    """Attitude FRD->NED (PX4) to FLU->ENU (ROS): ``q_NE^{-1} ∘ q ∘ q_x(π)^{-1}``, returned with ``w >=
+    0``."""
     q = as_trailing("q", q, (4,))
     conj = np.array([1.0, -1.0, -1.0, -1.0])
     return _canonical(_quat_multiply(_quat_multiply(Q_NE * conj, q), Q_X_PI * conj))
@@ -109,7 +110,8 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 
 def yaw_enu_to_ned(yaw):
-    """Heading ENU (from east, counter-clockwise) -> NED (from north, clockwise): ``π/2 − yaw``, in (−π, π]."""
+    """Heading ENU (from east, counter-clockwise) -> NED (from north, clockwise): ``π/2 − yaw``, in (−π,
+    π]."""
     yaw = as_angles("yaw", yaw)
     out = _wrap(0.5 * np.pi - yaw)
     return float(out) if out.ndim == 0 else out

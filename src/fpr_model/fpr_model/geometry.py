@@ -1,4 +1,5 @@
-"""Geometry of the FPR: configuration vector, leg anchors, leg rotations, inverse geometric model (thesis §2.3).
+"""Geometry of the FPR: configuration vector, leg anchors, leg rotations, inverse geometric model (thesis
+§2.3).
 
 Configuration ``q ∈ R^{7+n} = [p_p (3, world, m), q_p (4, [w,x,y,z], platform -> world), θ (n, rad)]`` (2.1).
 Velocity ``ν ∈ R^{6+n} = [v_p (3, world, m/s), ω_p (3, platform frame Fp, rad/s), θ̇ (n, rad/s)]`` (2.2).
@@ -108,7 +109,7 @@ class ModelConstants(NamedTuple):
     total_mass: float
     anchors_skew: np.ndarray  # (n, 3, 3) [a_i]x
     anchor_shift_inertia: np.ndarray  # (3, 3) Σ m_i (|a_i|² 1 − a_i a_iᵀ)
-    static_first_moment: np.ndarray  # (3,) m_p s_p + Σ m_i a_i  (θ-independent part of the total first moment)
+    static_first_moment: np.ndarray  # (3,) m_p s_p + Σ m_i a_i (θ-independent part of the first moment)
     leg_rotation_basis: np.ndarray  # (3, n, 3, 3): pR_li = cos θ_i·[0] + sin θ_i·[1] + [2]
 
 
@@ -205,7 +206,8 @@ def _parse_configuration(params: FprParameters, q, name: str = "q") -> ParsedCon
     ])  # (A.60)
     theta = q[7:]
     basis = constants.leg_rotation_basis
-    leg_rotations = np.cos(theta)[:, None, None] * basis[0] + np.sin(theta)[:, None, None] * basis[1] + basis[2]
+    leg_rotations = (np.cos(theta)[:, None, None] * basis[0] + np.sin(theta)[:, None, None] * basis[1]
+                     + basis[2])
     return ParsedConfiguration(q[:3], np.array([w, x, y, z]), rotation, theta, leg_rotations)
 
 
@@ -261,7 +263,8 @@ def _quat_exp_step(quat: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
 
 
 def difference_configuration(q0, q1) -> np.ndarray:
-    """The constant velocity ν′ that takes q0 to q1 in unit time: ``integrate_configuration(q0, ν′, 1) == q1``.
+    """The constant velocity ν′ that takes q0 to q1 in unit time: ``integrate_configuration(q0, ν′, 1) ==
+    q1``.
 
     Rotation part: ``ω′ = rotvec(q_p0^{-1} ∘ q_p1)`` (shortest rotation, body frame of q0).
     """
@@ -271,7 +274,8 @@ def difference_configuration(q0, q1) -> np.ndarray:
 
     out = np.empty(q0.size - 1)
     out[:3] = q1[:3] - q0[:3]
-    out[3:6] = quat_to_rotvec(quat_error(q0[3:7] / np.linalg.norm(q0[3:7]), q1[3:7] / np.linalg.norm(q1[3:7])))
+    quat0 = q0[3:7] / np.linalg.norm(q0[3:7])
+    out[3:6] = quat_to_rotvec(quat_error(quat0, q1[3:7] / np.linalg.norm(q1[3:7])))
     out[6:] = q1[7:] - q0[7:]
     return out
 
@@ -298,7 +302,8 @@ def leg_angles_from_positions(params: FprParameters, platform_position, platform
     ``A_iB_i = p_i − (p_p + PA_i)`` (world frame). Evaluated as ``atan2(‖PA_i × A_iB_i‖, PA_i · A_iB_i)``
     (same angle in [0, π], accurate near 0). With ``signed=True`` the angle is measured in the leg plane,
     positive below the platform: ``atan2(−z_p · A_iB_i, p_r_i · A_iB_i)`` (Fp components), which equals
-    the thesis value on the nominal branch and becomes negative when a quadrotor rises above the platform plane.
+    the thesis value on the nominal branch and becomes negative when a quadrotor rises above the platform
+    plane.
     """
     position = as_array("platform_position", platform_position, (3,))
     quat = as_array("platform_quat", platform_quat, (4,))

@@ -1,7 +1,8 @@
 """First- and second-order kinematics of the FPR (thesis §2.4).
 
 IKM ``v = J(q) ν`` (2.20): ``v = [v_1; ...; v_n]`` quadrotor CoM velocities (world, m/s),
-``ν = [v_p (world); ω_p (Fp); θ̇]``. FKM ``ν = J^† v`` (2.21). Second order ``v̇ = J ν̇ + J̇ ν`` (2.22)-(2.24).
+``ν = [v_p (world); ω_p (Fp); θ̇]``. FKM ``ν = J^† v`` (2.21). Second order ``v̇ = J ν̇ + J̇ ν``
+(2.22)-(2.24).
 
 J is singular when a leg lies in the platform plane (θ_i = 0) and regular on (0, π/2] (Six 2018; spec §1.2).
 The forward models refuse configurations outside that range or with ``cond(J) > CONDITION_LIMIT``.
@@ -11,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fpr_model._validation import as_array
 from fpr_model._math import cross, skew_batch
+from fpr_model._validation import as_array
 from fpr_model.geometry import ParsedConfiguration, _parse_configuration, model_constants
 from fpr_model.parameters import FprParameters
 
@@ -120,7 +121,9 @@ def check_regular_configuration(params: FprParameters, q, J: np.ndarray | None =
         J = _jacobian_from(params, parsed)
     condition = float(np.linalg.cond(J))
     if not condition <= CONDITION_LIMIT:
-        raise SingularConfigurationError(f"q: J is (near) singular, cond(J) = {condition:.3g} > {CONDITION_LIMIT:g}")
+        raise SingularConfigurationError(
+            f"q: J is (near) singular, cond(J) = {condition:.3g} > {CONDITION_LIMIT:g}"
+        )
     return condition
 
 
@@ -140,14 +143,18 @@ def forward_kinematics(params: FprParameters, q, uav_velocities, check_leg_range
     J = _jacobian_from(params, parsed)
     v = np.asarray(uav_velocities, dtype=float).reshape(-1) if np.size(uav_velocities) == J.shape[0] else None
     if v is None:
-        raise ValueError(f"uav_velocities: expected {J.shape[0] // 3}x3 values, got shape {np.shape(uav_velocities)}")
+        raise ValueError(
+            f"uav_velocities: expected {J.shape[0] // 3}x3 values, got shape {np.shape(uav_velocities)}"
+        )
     v = as_array("uav_velocities", v, (J.shape[0],))
     check_regular_configuration(params, q, J, check_leg_range)
     return _solve_jacobian(J, v)
 
 
-def forward_acceleration(params: FprParameters, q, nu, uav_accelerations, check_leg_range: bool = True) -> np.ndarray:
-    """Second-order FKM (2.24): ``ν̇ = J^† (v̇ − J̇ ν)``, quadrotor accelerations (n, 3) or (3n,), world, m/s²."""
+def forward_acceleration(params: FprParameters, q, nu, uav_accelerations,
+                         check_leg_range: bool = True) -> np.ndarray:
+    """Second-order FKM (2.24): ``ν̇ = J^† (v̇ − J̇ ν)``, quadrotor accelerations (n, 3) or (3n,), world,
+    m/s²."""
     parsed = _parse_configuration(params, q)
     J = _jacobian_from(params, parsed)
     nu = as_array("nu", nu, (J.shape[1],))

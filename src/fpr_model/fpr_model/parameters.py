@@ -6,19 +6,22 @@ functions (``mass_matrix(params, q)``, ...). Defaults are thesis Table B.1 (spec
 Frames and reference points (spec §0.1, thesis §2.2):
 
 - ``Fp``: platform frame at the platform point P (the centre of the revolute-joint circle).
-- ``F_li``: leg frame at the revolute-joint centre A_i; z = joint axis, x along the leg from A_i to the tip B_i.
+- ``F_li``: leg frame at the revolute-joint centre A_i; z = joint axis, x along the leg from A_i to the tip
+  B_i.
 
 Inertia reference points (Table B.1 does not state them, spec §5 open question 4). Choice made here:
 
 - ``leg_inertia`` I_l is about the joint origin A_i, in F_li (thesis (2.40)-(2.41) use ``li I_Oi`` "expressed
   at the origin of its frame"; I_l,yy = 0.035 > m_l·0.599² = 0.0237 is consistent with that). The quadrotor i
   is a point mass m_b,i at the tip: the composite leg has mass m_l + m_b,i, first moment
-  m_l·s_l + m_b,i·l·e_x and inertia I_l + m_b,i·diag(0, l², l²) about A_i (thesis (2.36)-(2.37), (2.41)-(2.42)).
+  m_l·s_l + m_b,i·l·e_x and inertia I_l + m_b,i·diag(0, l², l²) about A_i (thesis (2.36)-(2.37),
+  (2.41)-(2.42)).
 - ``platform_inertia`` I_p is taken about the platform frame origin P, in Fp. The thesis uses ``p I_Op`` "the
   moment of inertia expressed at the origin of the platform frame Fp" directly with the first moment
   m_p·s_p in (2.43) and (2.51), without any parallel-axis shift, so the Table B.1 value enters the model as an
   inertia about P. (Physically the Table B.1 value matches a triangle plate about its own centroid; the
-  difference, m_p·|s_p|² = 2.5e-5 kg·m² on the x and y axes, is 5 % of I_p,xx and is ignored, as in the thesis.)
+  difference, m_p·|s_p|² = 2.5e-5 kg·m² on the x and y axes, is 5 % of I_p,xx and is ignored, as in the
+  thesis.)
 
 Units: SI (m, kg, kg·m², rad, m/s²).
 """
@@ -94,7 +97,7 @@ def _inertia(name: str, value: Any) -> np.ndarray:
     elif array.shape == (9,):
         array = array.reshape(3, 3)
     if array.shape != (3, 3):
-        raise _field_error(name, f"expected 3 diagonal values, 9 values or a 3x3 matrix, got shape {array.shape}")
+        raise _field_error(name, f"expected 3 diagonal values, 9 values or a 3x3 matrix, got {array.shape}")
     if not np.isfinite(array).all():
         raise _field_error(name, "contains NaN or inf")
     scale = max(float(np.abs(array).max()), 1e-300)
@@ -152,7 +155,7 @@ class FprParameters:
                 raise _field_error("n", f"expected an integer, got {self.n!r}")
         n = int(self.n)
         if n < 3:
-            raise _field_error("n", f"needs at least 3 legs (the platform pose is not controllable below), got {n}")
+            raise _field_error("n", f"needs at least 3 legs (fewer cannot control the platform), got {n}")
         set_(self, "n", n)
         set_(self, "platform_radius", _positive("platform_radius", self.platform_radius))
         set_(self, "leg_length", _positive("leg_length", self.leg_length))
@@ -169,7 +172,7 @@ class FprParameters:
         set_(self, "leg_inertia", _inertia("leg_inertia", self.leg_inertia))
         masses = np.array(self.uav_masses, dtype=float) if np.ndim(self.uav_masses) else None
         if masses is None or masses.shape != (n,):
-            raise _field_error("uav_masses", f"expected {n} values (one per leg, n = {n}), got {self.uav_masses!r}")
+            raise _field_error("uav_masses", f"expected {n} values (one per leg), got {self.uav_masses!r}")
         if not np.isfinite(masses).all():
             raise _field_error("uav_masses", "contains NaN or inf")
         if (masses <= 0.0).any():
@@ -191,7 +194,8 @@ class FprParameters:
         )
 
     def __hash__(self) -> int:
-        return hash((self.n, self.platform_radius, self.leg_length, self.platform_mass, self.uav_masses.tobytes()))
+        return hash((self.n, self.platform_radius, self.leg_length, self.platform_mass,
+                     self.uav_masses.tobytes()))
 
     @property
     def total_mass(self) -> float:
@@ -226,7 +230,8 @@ def default_parameters(n: int = 3) -> FprParameters:
     """Thesis Table B.1 prototype. For n != 3 every quadrotor gets the mean Table B.1 mass (1.01767 kg)."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
         raise ValueError(f"n: expected an integer, got {n!r}")
-    uav_masses = list(TABLE_B1_UAV_MASSES) if n == 3 else [float(np.mean(TABLE_B1_UAV_MASSES))] * max(int(n), 0)
+    mean_mass = float(np.mean(TABLE_B1_UAV_MASSES))
+    uav_masses = list(TABLE_B1_UAV_MASSES) if n == 3 else [mean_mass] * max(int(n), 0)
     return FprParameters(
         n=int(n),
         platform_radius=0.127,
@@ -305,7 +310,8 @@ def parameters_to_dict(params: FprParameters) -> dict:
 
 
 def load_parameters(path: str) -> FprParameters:
-    """Load parameters from a YAML file (see ``config/fpr_parameters.yaml``); see :func:`parameters_from_dict`."""
+    """Load parameters from a YAML file (see ``config/fpr_parameters.yaml``); see
+    :func:`parameters_from_dict`."""
     import yaml
 
     with open(path, encoding="utf-8") as stream:

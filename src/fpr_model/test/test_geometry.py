@@ -2,8 +2,6 @@
 
 import numpy as np
 import pytest
-
-from fpr_model import rotations as rt
 from fpr_model.geometry import (
     difference_configuration,
     integrate_configuration,
@@ -16,6 +14,8 @@ from fpr_model.geometry import (
     split_velocity,
 )
 from fpr_model.parameters import default_parameters
+
+from fpr_model import rotations as rt
 
 
 def test_m5_anchor_layout():

@@ -1,10 +1,14 @@
-"""Tests of fpr_model.kinematics: J (2.20) vs IGM (spec M1), J̇ (2.23), FKM (2.21), (2.24), singularities (M4)."""
+"""Tests of fpr_model.kinematics: J (2.20) vs IGM (spec M1), J̇ (2.23), FKM (2.21), (2.24), singularities
+(M4)."""
 
 import numpy as np
 import pytest
-
-from fpr_model.geometry import difference_configuration, integrate_configuration, inverse_geometric_model
-from fpr_model.geometry import make_configuration
+from fpr_model.geometry import (
+    difference_configuration,
+    integrate_configuration,
+    inverse_geometric_model,
+    make_configuration,
+)
 from fpr_model.kinematics import (
     SingularConfigurationError,
     check_regular_configuration,
@@ -45,7 +49,8 @@ def test_m1_jacobian_central_difference(n):
 
 
 def test_m1_igm_vs_ikm_thesis_procedure():
-    """Thesis §2.6: δq ~ N(0, 0.001), ν′ takes q to q + δq in unit time (quaternion renormalised, exact log map).
+    """Thesis §2.6: δq ~ N(0, 0.001), ν′ takes q to q + δq in unit time (quaternion renormalised, exact log
+    map).
 
     The one-sided residual r = IGM(q+δq) − IGM(q) − J ν′ is second order in ν′: its median over draws is below
     the thesis's 1e-5 and every draw obeys the Taylor bound ‖r‖ ≤ √n (r + l) ‖ν′_rot,legs‖². The central
@@ -86,7 +91,8 @@ def test_jacobian_dot_vs_finite_difference(n):
     for _ in range(10):
         q, nu = _random_state(n, rng)
         h = 1e-6
-        fd = (jacobian(p, integrate_configuration(q, nu, h)) - jacobian(p, integrate_configuration(q, nu, -h))) / (2 * h)
+        fd = (jacobian(p, integrate_configuration(q, nu, h))
+              - jacobian(p, integrate_configuration(q, nu, -h))) / (2 * h)
         assert np.abs(jacobian_dot(p, q, nu) - fd).max() <= 1e-7
 
 

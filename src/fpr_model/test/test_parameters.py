@@ -5,7 +5,6 @@ import os
 
 import numpy as np
 import pytest
-
 from fpr_model.parameters import (
     FprParameters,
     default_parameters,
@@ -15,7 +14,8 @@ from fpr_model.parameters import (
     parameters_to_dict,
 )
 
-CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "fpr_parameters.yaml")
+PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(PACKAGE, "config", "fpr_parameters.yaml")
 
 
 def test_table_b1_defaults():
@@ -52,7 +52,8 @@ def test_yaml_config_equals_defaults_and_round_trip(tmp_path):
     d = parameters_to_dict(default_parameters(4))
     assert parameters_from_dict(d) == default_parameters(4)
     path = tmp_path / "p.yaml"
-    path.write_text("/**:\n  ros__parameters:\n    n: 4\n    leg_length: 1.1\n    platform_inertia: [1, 0, 0, 0, 2, 0, 0, 0, 3]\n")
+    path.write_text("/**:\n  ros__parameters:\n    n: 4\n    leg_length: 1.1\n"
+                    "    platform_inertia: [1, 0, 0, 0, 2, 0, 0, 0, 3]\n")
     p = load_parameters(str(path))
     assert p.n == 4 and p.leg_length == 1.1 and p.uav_masses.shape == (4,)
     assert np.array_equal(p.platform_inertia, np.diag([1.0, 2.0, 3.0]))

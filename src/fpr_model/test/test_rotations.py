@@ -111,7 +111,8 @@ def test_x4_euler_rate_matrix_and_derivative():
     eta, eta_dot = np.array([roll, pitch, 1.1]), np.array([0.4, -0.2, 0.9])
     h = 1e-6
     R = rt.euler_zyx_to_rotmat(*eta)
-    R_dot = (rt.euler_zyx_to_rotmat(*(eta + h * eta_dot)) - rt.euler_zyx_to_rotmat(*(eta - h * eta_dot))) / (2 * h)
+    R_dot = (rt.euler_zyx_to_rotmat(*(eta + h * eta_dot))
+             - rt.euler_zyx_to_rotmat(*(eta - h * eta_dot))) / (2 * h)
     W = R.T @ R_dot
     assert np.allclose([W[2, 1], W[0, 2], W[1, 0]], D @ eta_dot, atol=1e-9)
     # Ḋ (A.82) vs central difference of D along η̇.

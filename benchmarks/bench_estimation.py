@@ -1,0 +1,98 @@
+"""Benchmarks of fpr_estimation (issue 5): renderer, ArUco detection + PnP, EKF/MEKF predict and update.
+
+Run: .venv/bin/python benchmarks/bench_estimation.py   (ROS-free; inserts the src/<pkg> paths itself)
+Prints median and p95 per-call times. Targets: detection + PnP <= 3 ms per 640x480 frame, EKF predict <= 50 us,
+EKF update <= 100 us, renderer <= 2 ms per image.
+"""
+
+import os
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+for package in ("fpr_model", "fpr_sim", "fpr_estimation"):
+    sys.path.insert(0, os.path.join(ROOT, "src", package))
+
+import numpy as np  # noqa: E402
+from fpr_estimation.aruco import ArucoPoseDetector  # noqa: E402
+from fpr_estimation.ekf import RelativePoseEKF  # noqa: E402
+from fpr_estimation.estimator import EstimatorConfig, PoseEstimatorCore  # noqa: E402
+from fpr_estimation.mekf import RelativePoseMEKF  # noqa: E402
+from fpr_estimation.synthetic import uav_pose_in_platform  # noqa: E402
+from fpr_model.calibration import VisionCalibration, compose_transforms, invert_transform  # noqa: E402
+from fpr_model.parameters import default_parameters  # noqa: E402
+from fpr_model.rotations import quat_from_rotvec  # noqa: E402
+from fpr_sim.camera_renderer import MarkerRenderer  # noqa: E402
+
+
+def timeit(function, repeats):
+    samples = np.empty(repeats)
+    for k in range(repeats):
+        start = time.perf_counter()
+        function(k)
+        samples[k] = time.perf_counter() - start
+    return samples
+
+
+def report(name, samples, target=None):
+    median, p95 = np.median(samples) * 1e6, np.percentile(samples, 95) * 1e6
+    extra = f"  (target <= {target:g} us: {'ok' if median <= target else 'MISSED'}, median/target "\
+            f"{median / target:.2f})" if target else ""
+    print(f"{name:44s} median {median:9.1f} us   p95 {p95:9.1f} us{extra}")
+
+
+def main():
+    calibration = VisionCalibration()
+    rng = np.random.default_rng(0)
+    params = default_parameters()
+    poses = []
+    for _ in range(100):
+        legs = rng.uniform(np.radians(45), np.radians(75), 3)
+        roll, pitch = rng.uniform(-np.radians(10), np.radians(10), 2)
+        for pose in uav_pose_in_platform(params, legs, roll, pitch)[0]:
+            poses.append(compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(pose),
+                                            calibration.platform_T_marker))
+    renderer = MarkerRenderer(calibration.camera)
+    render_times = timeit(lambda k: renderer.render(poses[k % len(poses)]), 300)
+    noisy_times = timeit(lambda k: renderer.render(poses[k % len(poses)], blur_sigma=0.8, noise_sigma=3.0, rng=rng),
+                         300)
+    frames = [renderer.render(p) for p in poses]
+    frames = [f.image for f in frames if f.in_view]
+    detector = ArucoPoseDetector()
+    detect_times = timeit(lambda k: detector.detect(frames[k % len(frames)], calibration.camera), 300)
+    empty = np.full((480, 640), 110, np.uint8)
+    empty_times = timeit(lambda k: detector.detect(empty, calibration.camera), 100)
+
+    print(f"python {sys.version.split()[0]}, numpy {np.__version__}, opencv {__import__('cv2').__version__}, "
+          f"{os.cpu_count()} cpus")
+    report("renderer, 640x480 mono8", render_times, 2000)
+    report("renderer + blur 0.8 px + noise 3", noisy_times)
+    report("ArUco detect + IPPE PnP (marker in view)", detect_times, 3000)
+    report("ArUco detect, no marker", empty_times)
+
+    q0 = quat_from_rotvec([0.1, 0.2, -1.0])
+    rate = np.array([0.1, -0.2, 0.3])
+    position = np.array([0.5, -0.2, -0.9])
+    for filt, name in ((RelativePoseEKF(), "EKF"), (RelativePoseMEKF(estimate_gyro_bias=False), "MEKF"),
+                       (RelativePoseMEKF(estimate_gyro_bias=True), "MEKF + gyro bias")):
+        filt.initialize(position, q0)
+        report(f"{name} predict", timeit(lambda k, filt=filt: filt.predict(rate, 0.005), 5000), 50)
+
+        def update(k, filt=filt):
+            innovation, _, _ = filt.innovation(position, q0)
+            filt.correct(innovation)
+
+        report(f"{name} innovation + update", timeit(update, 5000), 100)
+    core = PoseEstimatorCore(EstimatorConfig())
+    pose = np.eye(4)
+    pose[:3, 3] = position
+    core.on_relative_pose(0.0, pose)
+    core.on_imu(0.0, np.array([1.0, 0, 0, 0]), rate)
+    report("pipeline on_imu (predict + checks)", timeit(lambda k: core.on_imu(0.005 * (k + 1), np.array(
+        [1.0, 0, 0, 0]), rate), 5000))
+    report("pipeline on_relative_pose (gate + update)", timeit(lambda k: core.on_relative_pose(1.0, pose), 5000))
+    report("pipeline output (50 Hz, with reconstruction)", timeit(lambda k: core.output(1.0), 5000))
+
+
+if __name__ == "__main__":
+    main()

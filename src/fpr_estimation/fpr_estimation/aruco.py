@@ -1,0 +1,210 @@
+"""ArUco marker detection and planar pose (thesis §4.2.1): the marker pose ``C_T_M`` in the camera frame. ROS-free.
+
+Camera frame: OpenCV optical (x right, y down, z forward); marker frame: OpenCV ArUco (origin at the centre, z out
+of the face). Units: metres, radians, pixels.
+
+Pose: ``cv2.solvePnPGeneric(..., SOLVEPNP_IPPE_SQUARE)`` returns both solutions of the planar (IPPE) problem with
+their reprojection errors. The two differ by a reflection of the marker's tilt; at long range or small tilt they
+are nearly equally good (the planar ambiguity that makes ArUco poses "flip"). We keep the solution closest in
+rotation to the previous accepted pose when there is one and the ambiguity ratio is below
+``ambiguity_threshold`` (the image cannot tell them apart), otherwise the one with the lower reprojection
+error. ``ambiguity_ratio`` = error of the rejected solution / error of the chosen one (≫ 1: unambiguous).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from fpr_model.calibration import CameraModel, make_transform
+
+__all__ = [
+    "ArucoConfig", "ArucoPoseDetector", "MarkerObservation", "aruco_dictionary", "decode_image", "validate_mono_image",
+]
+
+CORNER_REFINEMENT = {
+    "none": cv2.aruco.CORNER_REFINE_NONE,
+    "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
+    "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
+    "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
+}
+
+
+@dataclass(frozen=True)
+class ArucoConfig:
+    """Detector configuration (YAML: config/aruco_detector.yaml)."""
+
+    dictionary: str = "DICT_ARUCO_MIP_36H12"
+    marker_id: int = 0
+    marker_size: float = 0.109  #: black-square side [m]
+    corner_refinement: str = "apriltag"  #: none | subpix | contour | apriltag (most accurate on 40-80 px markers)
+    corner_refinement_win_size: int = 5
+    corner_refinement_max_iterations: int = 30
+    corner_refinement_min_accuracy: float = 0.01
+    adaptive_thresh_win_size_min: int = 3
+    adaptive_thresh_win_size_max: int = 23
+    adaptive_thresh_win_size_step: int = 10
+    min_marker_perimeter_rate: float = 0.03
+    ambiguity_threshold: float = 2.0  #: below this ratio, prefer the solution consistent with the previous pose
+
+    def __post_init__(self) -> None:
+        if self.corner_refinement not in CORNER_REFINEMENT:
+            raise ValueError(f"corner_refinement: expected one of {sorted(CORNER_REFINEMENT)}")
+        if not self.marker_size > 0.0:
+            raise ValueError("marker_size must be positive")
+
+
+@dataclass
+class MarkerObservation:
+    """One detection: ``C_T_M`` and its quality.
+
+    camera_T_marker: 4×4 pose of the marker in the camera frame [m].
+    corners: (4, 2) detected corners TL, TR, BR, BL [px].
+    reprojection_error: RMS over the 4 corners of the chosen solution [px].
+    ambiguity_ratio: reprojection error of the other IPPE solution / chosen one (inf if only one solution).
+    """
+
+    marker_id: int
+    camera_T_marker: np.ndarray
+    corners: np.ndarray
+    reprojection_error: float
+    ambiguity_ratio: float
+    rvec: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
+    tvec: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
+
+
+def validate_mono_image(image) -> np.ndarray:
+    """Return ``image`` as a 2-D uint8 array or raise ValueError with a reason (empty, wrong dtype/shape)."""
+    if image is None:
+        raise ValueError("no image")
+    image = np.asarray(image)
+    if image.size == 0:
+        raise ValueError("empty image")
+    if image.dtype != np.uint8:
+        raise ValueError(f"expected uint8 pixels, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim != 2:
+        raise ValueError(f"expected a single-channel image, got shape {image.shape}")
+    if min(image.shape) < 8:
+        raise ValueError(f"image too small: {image.shape}")
+    return image
+
+
+def aruco_dictionary(name: str):
+    """OpenCV predefined dictionary by its cv2.aruco constant name, e.g. "DICT_ARUCO_MIP_36H12"."""
+    for key in (name, name.upper()):
+        if key.startswith("DICT_") and isinstance(getattr(cv2.aruco, key, None), int):
+            return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, key))
+    raise ValueError(f"unknown ArUco dictionary {name!r}")
+
+
+def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    cos = 0.5 * (np.trace(Ra.T @ Rb) - 1.0)
+    return float(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+class ArucoPoseDetector:
+    """Detects one marker id and estimates its pose; remembers the last pose for the ambiguity choice."""
+
+    def __init__(self, config: ArucoConfig | None = None) -> None:
+        self.config = config if config is not None else ArucoConfig()
+        c = self.config
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = CORNER_REFINEMENT[c.corner_refinement]
+        params.cornerRefinementWinSize = int(c.corner_refinement_win_size)
+        params.cornerRefinementMaxIterations = int(c.corner_refinement_max_iterations)
+        params.cornerRefinementMinAccuracy = float(c.corner_refinement_min_accuracy)
+        params.adaptiveThreshWinSizeMin = int(c.adaptive_thresh_win_size_min)
+        params.adaptiveThreshWinSizeMax = int(c.adaptive_thresh_win_size_max)
+        params.adaptiveThreshWinSizeStep = int(c.adaptive_thresh_win_size_step)
+        params.minMarkerPerimeterRate = float(c.min_marker_perimeter_rate)
+        self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(c.dictionary), params)
+        half = 0.5 * c.marker_size
+        #: Object points in ArUco corner order TL, TR, BR, BL (what SOLVEPNP_IPPE_SQUARE expects).
+        self.object_points = np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0],
+                                       [-half, -half, 0.0]])
+        self.previous_rotation: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the previous pose (e.g. after a long loss of the marker)."""
+        self.previous_rotation = None
+
+    def detect(self, image, camera: CameraModel) -> MarkerObservation | None:
+        """Detect the configured marker in a mono8 image; None if it is not found.
+
+        Raises ValueError for an unusable image (see :func:`validate_mono_image`).
+        """
+        image = validate_mono_image(image)
+        corners_list, ids, _ = self._detector.detectMarkers(image)
+        if ids is None or len(ids) == 0:
+            return None
+        matches = [k for k, marker_id in enumerate(ids.ravel()) if int(marker_id) == self.config.marker_id]
+        if not matches:
+            return None
+        # Several candidates with the same id: take the largest (closest / most accurate).
+        corners = max((corners_list[k].reshape(4, 2) for k in matches),
+                      key=lambda c: cv2.contourArea(c.astype(np.float32)))
+        return self.estimate_pose(corners.astype(np.float64), camera)
+
+    def estimate_pose(self, corners: np.ndarray, camera: CameraModel) -> MarkerObservation | None:
+        """IPPE_SQUARE pose from 4 corners (TL, TR, BR, BL) with the ambiguity resolution of the module doc."""
+        image_points = np.ascontiguousarray(corners, dtype=np.float64).reshape(4, 1, 2)
+        count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+            self.object_points, image_points, camera.camera_matrix, camera.dist_coeffs,
+            flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if count == 0:
+            return None
+        errors = np.asarray(errors, dtype=float).ravel() if errors is not None else np.zeros(count)
+        candidates = []
+        for k in range(count):
+            R, _ = cv2.Rodrigues(rvecs[k])
+            t = np.asarray(tvecs[k], dtype=float).ravel()
+            if t[2] <= 0.0 or not np.isfinite(R).all() or not np.isfinite(t).all():
+                continue
+            candidates.append((float(errors[k]), R, t, np.asarray(rvecs[k], dtype=float).ravel()))
+        if not candidates:
+            return None
+        candidates.sort(key=lambda c: c[0])
+        chosen = candidates[0]
+        ratio = float("inf")
+        if len(candidates) > 1:
+            other = candidates[1]
+            ratio = other[0] / max(chosen[0], 1e-9)
+            if self.previous_rotation is not None and ratio < self.config.ambiguity_threshold:
+                if (_rotation_angle(self.previous_rotation, other[1])
+                        < _rotation_angle(self.previous_rotation, chosen[1])):
+                    chosen, other = other, chosen
+                    ratio = other[0] / max(chosen[0], 1e-9)
+        error, R, t, rvec = chosen
+        self.previous_rotation = R
+        return MarkerObservation(self.config.marker_id, make_transform(R, t), corners.reshape(4, 2).copy(),
+                                 float(error), float(ratio), rvec, t.copy())
+
+
+#: sensor_msgs/Image encodings the detector accepts (colour is converted to grey).
+SUPPORTED_ENCODINGS = ("mono8", "8UC1", "bgr8", "rgb8", "bgra8", "rgba8")
+
+
+def decode_image(encoding: str, width: int, height: int, step: int, data) -> np.ndarray:
+    """Turn sensor_msgs/Image fields into a mono8 array; raise ValueError with a reason for bad input."""
+    if encoding not in SUPPORTED_ENCODINGS:
+        raise ValueError(f"unsupported encoding {encoding!r} (supported: {', '.join(SUPPORTED_ENCODINGS)})")
+    channels = {"mono8": 1, "8UC1": 1, "bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4}[encoding]
+    width, height, step = int(width), int(height), int(step)
+    if width <= 0 or height <= 0:
+        raise ValueError(f"empty image ({width}×{height})")
+    if step < width * channels:
+        raise ValueError(f"step {step} < width × channels = {width * channels}")
+    buffer = np.frombuffer(bytes(data) if not isinstance(data, (bytes, bytearray, memoryview)) else data,
+                           dtype=np.uint8)
+    if buffer.size < step * height:
+        raise ValueError(f"truncated image: {buffer.size} bytes for {height} rows of {step}")
+    rows = buffer[: step * height].reshape(height, step)[:, : width * channels]
+    if channels == 1:
+        return np.ascontiguousarray(rows)
+    pixels = rows.reshape(height, width, channels)
+    code = {"bgr8": cv2.COLOR_BGR2GRAY, "rgb8": cv2.COLOR_RGB2GRAY, "bgra8": cv2.COLOR_BGRA2GRAY,
+            "rgba8": cv2.COLOR_RGBA2GRAY}[encoding]
+    return cv2.cvtColor(pixels, code)

@@ -1,0 +1,116 @@
+"""ArUco detection + IPPE pose on synthetic images (acceptance: rate >= 99 %, median error <= 3 mm / 0.5 deg)."""
+
+import cv2
+import numpy as np
+import pytest
+from fpr_estimation.aruco import ArucoConfig, ArucoPoseDetector, decode_image, validate_mono_image
+from fpr_estimation.synthetic import uav_pose_in_platform
+from fpr_model.calibration import CameraModel, VisionCalibration, compose_transforms, invert_transform
+from fpr_model.parameters import default_parameters
+from fpr_sim.camera_renderer import MarkerRenderer
+
+
+def _rotation_error_deg(Ra, Rb):
+    return float(np.degrees(np.arccos(np.clip(0.5 * (np.trace(Ra.T @ Rb) - 1.0), -1.0, 1.0))))
+
+
+def _scenes(count, seed, calibration):
+    """Random configurations: leg angles 45-75 deg, platform roll/pitch +-10 deg, any yaw; all UAVs' views."""
+    rng = np.random.default_rng(seed)
+    params = default_parameters()
+    for _ in range(count):
+        legs = rng.uniform(np.radians(45.0), np.radians(75.0), 3)
+        roll, pitch = rng.uniform(-np.radians(10.0), np.radians(10.0), 2)
+        poses, _, _ = uav_pose_in_platform(params, legs, roll, pitch, rng.uniform(-np.pi, np.pi))
+        for pose in poses:
+            yield compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(pose),
+                                     calibration.platform_T_marker)
+
+
+def _run(calibration, count=120, seed=3, **render_kwargs):
+    renderer = MarkerRenderer(calibration.camera, calibration.marker_size)
+    detector = ArucoPoseDetector()
+    rng = np.random.default_rng(seed + 100)
+    in_view = detected = 0
+    errors = []
+    for truth in _scenes(count, seed, calibration):
+        frame = renderer.render(truth, rng=rng, **render_kwargs)
+        if not frame.in_view:
+            continue
+        in_view += 1
+        detector.reset()
+        observation = detector.detect(frame.image, calibration.camera)
+        if observation is None:
+            continue
+        detected += 1
+        errors.append((np.linalg.norm(observation.camera_T_marker[:3, 3] - truth[:3, 3]),
+                       _rotation_error_deg(observation.camera_T_marker[:3, :3], truth[:3, :3])))
+    return in_view, detected, np.array(errors)
+
+
+def test_detection_rate_and_accuracy_without_noise():
+    in_view, detected, errors = _run(VisionCalibration())
+    print(f"in view {in_view}/360, detected {detected}, median {1e3 * np.median(errors[:, 0]):.2f} mm "
+          f"{np.median(errors[:, 1]):.3f} deg")
+    assert in_view >= 300  # most random poses (legs 45-75 deg, +-10 deg platform) are in view
+    assert detected / in_view >= 0.99
+    assert np.median(errors[:, 0]) <= 0.003
+    assert np.median(errors[:, 1]) <= 0.5
+
+
+def test_detection_with_blur_and_noise_still_works():
+    in_view, detected, errors = _run(VisionCalibration(), count=40, blur_sigma=0.8, noise_sigma=4.0)
+    print(f"noisy: detected {detected}/{in_view}, median {1e3 * np.median(errors[:, 0]):.2f} mm "
+          f"{np.median(errors[:, 1]):.3f} deg")
+    assert detected / in_view >= 0.95
+    assert np.median(errors[:, 0]) <= 0.01 and np.median(errors[:, 1]) <= 1.5
+
+
+def test_distorted_camera():
+    camera = CameraModel(distortion=(-0.2, 0.08, 0.0005, -0.0003, 0.0))
+    in_view, detected, errors = _run(VisionCalibration(camera=camera), count=20)
+    assert detected / in_view >= 0.95
+    assert np.median(errors[:, 0]) <= 0.005 and np.median(errors[:, 1]) <= 1.0
+
+
+def test_ambiguity_prefers_the_previous_pose():
+    calibration = VisionCalibration()
+    renderer = MarkerRenderer(calibration.camera)
+    truth = next(_scenes(1, 5, calibration))
+    frame = renderer.render(truth)
+    detector = ArucoPoseDetector(ArucoConfig(ambiguity_threshold=1e9))  # always ambiguous -> use history
+    first = detector.detect(frame.image, calibration.camera)
+    assert first is not None and first.ambiguity_ratio > 1.0
+    # Pretend the previous pose was the other IPPE solution: the detector must now pick it.
+    count, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+        detector.object_points, first.corners.reshape(4, 1, 2), calibration.camera.camera_matrix,
+        calibration.camera.dist_coeffs, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    assert count == 2
+    other = [cv2.Rodrigues(r)[0] for r in rvecs]
+    other = max(other, key=lambda R: _rotation_error_deg(R, first.camera_T_marker[:3, :3]))
+    detector.previous_rotation = other
+    second = detector.detect(frame.image, calibration.camera)
+    assert _rotation_error_deg(second.camera_T_marker[:3, :3], other) < 1e-6
+    assert second.ambiguity_ratio < 1.0  # reported honestly: the chosen one fits worse
+
+
+def test_no_marker_and_bad_images():
+    camera = CameraModel()
+    detector = ArucoPoseDetector()
+    assert detector.detect(np.full((480, 640), 120, np.uint8), camera) is None
+    garbled = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
+    assert detector.detect(garbled, camera) is None
+    for bad in (None, np.zeros((0, 0), np.uint8), np.zeros((480, 640), np.float32), np.zeros((4, 4, 3), np.uint8)):
+        with pytest.raises(ValueError):
+            validate_mono_image(bad)
+    with pytest.raises(ValueError, match="unsupported encoding"):
+        decode_image("16UC1", 4, 4, 8, bytes(32))
+    with pytest.raises(ValueError, match="truncated"):
+        decode_image("mono8", 640, 480, 640, bytes(100))
+    with pytest.raises(ValueError, match="empty"):
+        decode_image("mono8", 0, 0, 0, b"")
+    rgb = np.zeros((2, 3, 3), np.uint8)
+    rgb[..., 0] = 255
+    assert decode_image("rgb8", 3, 2, 9, rgb.tobytes()).shape == (2, 3)
+    padded = decode_image("mono8", 3, 2, 4, bytes([1, 2, 3, 99, 4, 5, 6, 99]))
+    assert padded.tolist() == [[1, 2, 3], [4, 5, 6]]
