@@ -1,0 +1,133 @@
+"""fpr_sim benchmarks: physics real-time factor (n = 3, 1 kHz, no ROS), render time per image, and the simulator
+core with a scripted MAVLink setpoint client in lockstep (UDP on 127.0.0.1: run via scripts/isolated.sh).
+
+    bash scripts/isolated.sh python benchmarks/bench_sim.py
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+for package in ("fpr_model", "fpr_sim", "fpr_px4_bridge"):
+    sys.path.insert(0, str(ROOT / "src" / package))
+os.environ["MAVLINK20"] = "1"
+
+import numpy as np  # noqa: E402
+from fpr_model.dynamics import forward_dynamics, gravity, thrusts_from_wrench  # noqa: E402
+from fpr_sim.cameras import CameraRig  # noqa: E402
+from fpr_sim.plant import Plant  # noqa: E402
+from fpr_sim.scenario import CameraConfig, scenario_from_dict  # noqa: E402
+from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
+from fpr_sim.structure import StructureDynamics  # noqa: E402
+
+
+def bench_physics(seconds: float = 3.0) -> None:
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
+                                   "ground": {"enabled": False}})
+    plant = Plant(scenario)
+    q = plant.state.configuration()
+    forces = thrusts_from_wrench(plant.params, q, gravity(plant.params, q))
+    from fpr_sim.quadrotor import AttitudeCommand
+
+    u = np.linalg.norm(forces, axis=1) / plant.fleet.max_thrust()
+    plant.set_command(AttitudeCommand(plant.default_uav_attitudes(forces), u, np.ones(3, dtype=bool)))
+    steps = int(seconds * 1000)
+    start = time.perf_counter()
+    for _ in range(steps):
+        plant.step()
+    wall = time.perf_counter() - start
+    print(f"plant step (n=3, 1 kHz, RK4 structure + RK4 quadrotors, PX4 loop 250 Hz): "
+          f"{1e6 * wall / steps:.1f} us/step, real-time factor {seconds / wall:.2f}x")
+    sd = plant.structure
+    state = plant.state
+    xi = np.concatenate([state.velocity, state.rate, state.leg_rates])
+    c, s, c2, s2 = sd.leg_trig(state.leg_angles)
+    g = np.array([0.0, 0.0, -9.81])
+    qf = np.zeros(9)
+    reps = 5000
+    start = time.perf_counter()
+    for _ in range(reps):
+        sd._body_acceleration(c, s, c2, s2, xi, g, qf)
+    fast = (time.perf_counter() - start) / reps
+    nu = state.generalized_velocity()
+    reps_ref = 500
+    start = time.perf_counter()
+    for _ in range(reps_ref):
+        forward_dynamics(plant.params, q, nu, qf)
+    ref = (time.perf_counter() - start) / reps_ref
+    print(f"structure forward dynamics: fast {1e6 * fast:.1f} us/call vs fpr_model.forward_dynamics "
+          f"{1e6 * ref:.1f} us/call ({ref / fast:.1f}x)")
+    start = time.perf_counter()
+    StructureDynamics(plant.params)
+    print(f"per-parameter basis fit: {1e3 * (time.perf_counter() - start):.1f} ms once")
+
+
+def bench_render(frames: int = 200) -> None:
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 1.0},
+                                      "ground": {"enabled": False}}))
+    truth = plant.ground_truth()
+    rig = CameraRig(CameraConfig(pixel_noise=0.0), 3, seed=0)
+    rig.render(truth)
+    start = time.perf_counter()
+    for _ in range(frames):
+        rig.render(truth)
+    plain = (time.perf_counter() - start) / (3 * frames)
+    rig = CameraRig(CameraConfig(pixel_noise=2.0, blur_sigma=0.5), 3, seed=0)
+    start = time.perf_counter()
+    for _ in range(frames):
+        rig.render(truth)
+    noisy = (time.perf_counter() - start) / (3 * frames)
+    print(f"render 640x480 mono8: {1e3 * plain:.2f} ms/image (no noise), {1e3 * noisy:.2f} ms/image "
+          f"(noise 2 + blur 0.5)")
+
+
+def bench_lockstep(seconds: float = 3.0) -> None:
+    from fpr_model.frames import quat_enu_flu_to_ned_frd
+    from pymavlink import mavutil
+
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
+                                   "ground": {"enabled": False}, "cameras": {"enabled": False}})
+    sim = Simulation(scenario, SimulationOptions(base_port=0, lockstep=True, lockstep_timeout=0.5))
+    targets = [(e.quat_local.copy(), e.thrust) for e in sim.emulators]
+    stop = threading.Event()
+
+    def client(i: int) -> None:
+        link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{sim.ports[i]}", source_system=200 + i)
+        q = [float(v) for v in quat_enu_flu_to_ned_frd(targets[i][0])]
+        last_ms = -1
+        link.mav.set_attitude_target_send(time_boot_ms=0, target_system=i + 1, target_component=1, type_mask=7,
+                                          q=q, body_roll_rate=0.0, body_pitch_rate=0.0, body_yaw_rate=0.0,
+                                          thrust=targets[i][1])
+        while not stop.is_set():  # a scripted controller: one setpoint per 20 ms of simulated time
+            msg = link.recv_match(type="ATTITUDE_QUATERNION", blocking=True, timeout=0.2)
+            if msg is None or msg.time_boot_ms // 20 == last_ms // 20:
+                continue
+            last_ms = msg.time_boot_ms
+            link.mav.set_attitude_target_send(time_boot_ms=msg.time_boot_ms, target_system=i + 1,
+                                              target_component=1, type_mask=7, q=q, body_roll_rate=0.0,
+                                              body_pitch_rate=0.0, body_yaw_rate=0.0, thrust=targets[i][1])
+
+    threads = [threading.Thread(target=client, args=(i,), daemon=True) for i in range(3)]
+    for thread in threads:
+        thread.start()
+    start = time.perf_counter()
+    sim.advance(seconds)
+    wall = time.perf_counter() - start
+    stop.set()
+    for thread in threads:
+        thread.join()
+    print(f"simulator core, lockstep, 3 scripted MAVLink clients (no ROS, no cameras): real-time factor "
+          f"{seconds / wall:.2f}x, lockstep timeouts {sim.lockstep_timeouts}, setpoints "
+          f"{[e.counters.setpoints for e in sim.emulators]}")
+    sim.close()
+
+
+if __name__ == "__main__":
+    bench_physics()
+    bench_render()
+    bench_lockstep()

@@ -1,0 +1,381 @@
+"""One emulated PX4 autopilot per UAV, speaking MAVLink 2 over UDP on 127.0.0.1 as PX4 SITL does. ROS-free.
+
+Server side like PX4 SITL: it binds ``127.0.0.1:port`` (default 14540 + i − 1) and replies to the address the
+last valid datagram came from. Behaviour (spec px4_ros_facts.md §1.3-§1.5):
+
+- HEARTBEAT as MAV_TYPE_QUADROTOR / MAV_AUTOPILOT_PX4, ``base_mode`` with CUSTOM_MODE_ENABLED (+ SAFETY_ARMED,
+  + AUTO|GUIDED|STABILIZE in OFFBOARD/AUTO), ``custom_mode`` = PX4 main/sub mode (fpr_px4_bridge.px4_protocol);
+- COMMAND_LONG ARM/DISARM (400), DO_SET_MODE (176), DO_FLIGHTTERMINATION (185) answered with COMMAND_ACK.
+  Arming and OFFBOARD need a healthy setpoint stream (gaps < 1/offboard_min_rate for >= offboard_warmup s),
+  else TEMPORARILY_REJECTED; in-flight disarm needs the force magic 21196; other commands UNSUPPORTED;
+- SET_ATTITUDE_TARGET (NED/FRD quaternion, normalized thrust, type_mask honoured: ATTITUDE_IGNORE -> body rate
+  mode, THROTTLE_IGNORE keeps the thrust, yaw rate feed-forward unless bit 4). Each valid message is offboard
+  proof of life; a NaN/inf or non-unit quaternion or NaN thrust is rejected (previous setpoint kept, counted);
+  thrust is clamped to [0, 1]; messages for another system id are ignored;
+- offboard loss: no setpoint for COM_OF_LOSS_T (1 s) in OFFBOARD -> failsafe: AUTO.LOITER (level attitude,
+  last thrust) for ``failsafe_hold_time``, then AUTO.LAND (level, reduced thrust) and disarm once landed;
+- telemetry from simulation time: ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED (own frame
+  F0i, NED) at ``telemetry_rate``; HEARTBEAT, SYS_STATUS, BATTERY_STATUS at ``status_rate``;
+- malformed, unknown or unhandled MAVLink is ignored and counted (:attr:`Px4Emulator.counters`).
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+from dataclasses import dataclass
+
+import numpy as np
+from fpr_model.frames import enu_to_ned, flu_to_frd, quat_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
+from fpr_model.rotations import quat_multiply, quat_to_euler_zyx
+from fpr_px4_bridge.px4_protocol import (
+    ATTITUDE_IGNORE,
+    BODY_PITCH_RATE_IGNORE,
+    BODY_ROLL_RATE_IGNORE,
+    BODY_YAW_RATE_IGNORE,
+    FORCE_DISARM_MAGIC,
+    MAV_AUTOPILOT_PX4,
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_FLIGHTTERMINATION,
+    MAV_CMD_DO_SET_MODE,
+    MAV_MODE_FLAG_AUTO_ENABLED,
+    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    MAV_MODE_FLAG_GUIDED_ENABLED,
+    MAV_MODE_FLAG_SAFETY_ARMED,
+    MAV_MODE_FLAG_STABILIZE_ENABLED,
+    MAV_STATE_ACTIVE,
+    MAV_TYPE_QUADROTOR,
+    THROTTLE_IGNORE,
+    Px4AutoSubMode,
+    Px4MainMode,
+    encode_custom_mode,
+    import_mavlink,
+)
+
+from fpr_sim.scenario import Px4Config
+from fpr_sim.sensors import ImuSample
+
+__all__ = ["EmulatorCounters", "Px4Emulator", "Px4Setpoint"]
+
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_RESULT_UNSUPPORTED = 3
+MAV_STATE_STANDBY = 3
+_UNIT_TOLERANCE = 1e-3
+
+
+@dataclass
+class EmulatorCounters:
+    """Counts of what one emulator received."""
+
+    datagrams: int = 0
+    setpoints: int = 0  #: accepted SET_ATTITUDE_TARGET
+    rejected_setpoints: int = 0  #: NaN/inf, non-unit quaternion, NaN thrust
+    garbage: int = 0  #: malformed frames (bad CRC, bad length, unknown message id)
+    ignored: int = 0  #: valid MAVLink we do not handle, or addressed to another system
+    commands: int = 0
+    failsafes: int = 0
+
+
+@dataclass
+class Px4Setpoint:
+    """What the emulator feeds its attitude controller, in the WORLD frame F0 (ENU/FLU)."""
+
+    quat: np.ndarray  #: [w,x,y,z] body FLU -> world ENU
+    thrust: float  #: normalized [0, 1]
+    armed: bool
+    rate_feedforward: np.ndarray  #: body FLU [rad/s]
+
+
+class Px4Emulator:
+    """PX4 of UAV ``uav_id`` (1-based = MAVLink system id); see the module doc. Call :meth:`poll` and
+    :meth:`update` with the simulation time, :meth:`send_telemetry` / :meth:`send_status` when due."""
+
+    def __init__(self, uav_id: int, config: Px4Config, yaw_offset: float, port: int | None = None,
+                 host: str = "127.0.0.1") -> None:
+        if host not in ("127.0.0.1", "localhost"):
+            raise ValueError(f"MAVLink is loopback-only in this project (DESIGN.md §6), got host {host!r}")
+        self.uav_id = int(uav_id)
+        self.config = config
+        self.yaw_offset = float(yaw_offset)
+        mavlink = import_mavlink()
+        self._mavlink = mavlink
+        self.mav = mavlink.MAVLink(None, srcSystem=self.uav_id, srcComponent=1)
+        self.mav.robust_parsing = True
+        self.port = 14540 + self.uav_id - 1 if port is None else int(port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sock.bind(("127.0.0.1", self.port))
+        self.port = self.sock.getsockname()[1]
+        self.peer: tuple[str, int] | None = None
+        self.counters = EmulatorCounters()
+        self.armed = False
+        self.main_mode = Px4MainMode.POSCTL
+        self.sub_mode = 0
+        self.time = 0.0
+        self._stream_start: float | None = None  # start of the current healthy setpoint stream
+        self._last_setpoint_time: float | None = None
+        self._failsafe_since: float | None = None
+        self._landed_since: float | None = None
+        self.quat_local = np.array([1.0, 0.0, 0.0, 0.0])  # latest attitude setpoint, F0i ENU/FLU
+        self.thrust = 0.0
+        self.rate_feedforward = np.zeros(3)
+        self.rate_mode = False
+        self.landed = True
+
+    # ------------------------------------------------------------------------------------------ frames
+    @property
+    def _q_world_from_local(self) -> np.ndarray:
+        half = 0.5 * self.yaw_offset
+        return np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+
+    # ------------------------------------------------------------------------------------------ receive
+    def close(self) -> None:
+        self.sock.close()
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def poll(self, sim_time: float) -> int:
+        """Read and handle every pending datagram at simulation time ``sim_time`` [s]; returns how many."""
+        self.time = sim_time
+        count = 0
+        while True:
+            try:
+                data, address = self.sock.recvfrom(4096)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                break
+            count += 1
+            self.counters.datagrams += 1
+            try:
+                messages = self.mav.parse_buffer(data) or []
+            except Exception:  # noqa: BLE001 - any parser failure is garbage, never a crash
+                self.counters.garbage += 1
+                self.mav.buf = bytearray()
+                self.mav.buf_index = 0
+                continue
+            for msg in messages:
+                self._handle(msg, address)
+        return count
+
+    def _handle(self, msg, address) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            self.counters.garbage += 1
+            return
+        self.peer = address
+        if kind == "SET_ATTITUDE_TARGET":
+            self._handle_attitude_target(msg)
+        elif kind == "COMMAND_LONG":
+            self._handle_command(msg)
+        elif kind == "HEARTBEAT":
+            return
+        else:
+            self.counters.ignored += 1
+
+    def _for_me(self, msg) -> bool:
+        return int(getattr(msg, "target_system", 0)) in (0, self.uav_id)
+
+    def _handle_attitude_target(self, msg) -> None:
+        if not self._for_me(msg):
+            self.counters.ignored += 1
+            return
+        mask = int(msg.type_mask)
+        q_ned = np.asarray(msg.q, dtype=float)
+        thrust = float(msg.thrust)
+        rates = np.array([msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate], dtype=float)
+        attitude_used = not mask & ATTITUDE_IGNORE
+        unit = np.isfinite(q_ned).all() and abs(math.sqrt(float(q_ned @ q_ned)) - 1.0) <= _UNIT_TOLERANCE
+        if attitude_used and not unit:
+            self.counters.rejected_setpoints += 1
+            return
+        if not mask & THROTTLE_IGNORE and not math.isfinite(thrust):
+            self.counters.rejected_setpoints += 1
+            return
+        if not np.isfinite(rates).all():
+            rates = np.zeros(3)
+        self.counters.setpoints += 1
+        gap_limit = 1.0 / self.config.offboard_min_rate
+        if self._last_setpoint_time is None or self.time - self._last_setpoint_time > gap_limit:
+            self._stream_start = self.time
+        self._last_setpoint_time = self.time
+        if not mask & THROTTLE_IGNORE:
+            self.thrust = min(1.0, max(0.0, thrust))
+        ignore = np.array([mask & BODY_ROLL_RATE_IGNORE, mask & BODY_PITCH_RATE_IGNORE, mask & BODY_YAW_RATE_IGNORE])
+        rates_flu = flu_to_frd(np.where(ignore != 0, 0.0, rates))  # FRD <-> FLU is its own inverse
+        if attitude_used:
+            self.quat_local = quat_ned_frd_to_enu_flu(q_ned / np.linalg.norm(q_ned))
+            self.rate_mode = False
+            self.rate_feedforward = np.array([0.0, 0.0, rates_flu[2]])
+        elif not (mask & BODY_ROLL_RATE_IGNORE and mask & BODY_PITCH_RATE_IGNORE):
+            self.rate_mode = True
+            self.rate_feedforward = rates_flu
+
+    def stream_healthy(self) -> bool:
+        """A setpoint stream faster than offboard_min_rate has run for at least offboard_warmup seconds."""
+        if self._last_setpoint_time is None or self._stream_start is None:
+            return False
+        fresh = self.time - self._last_setpoint_time <= 1.0 / self.config.offboard_min_rate
+        return fresh and self._last_setpoint_time - self._stream_start >= self.config.offboard_warmup
+
+    def _ack(self, command: int, result: int) -> None:
+        self._send(self.mav.command_ack_encode(command=command, result=result, progress=0, result_param2=0,
+                                               target_system=0, target_component=0))
+
+    def _handle_command(self, msg) -> None:
+        if not self._for_me(msg):
+            self.counters.ignored += 1
+            return
+        self.counters.commands += 1
+        command = int(msg.command)
+        if command == MAV_CMD_COMPONENT_ARM_DISARM:
+            if msg.param1 >= 0.5:
+                if self.armed:
+                    result = MAV_RESULT_ACCEPTED
+                elif self.stream_healthy():
+                    result = MAV_RESULT_ACCEPTED
+                    self.armed = True
+                    self._landed_since = None
+                else:
+                    result = MAV_RESULT_TEMPORARILY_REJECTED
+            else:
+                if not self.armed or self.landed or abs(msg.param2 - FORCE_DISARM_MAGIC) < 0.5:
+                    self.armed = False
+                    result = MAV_RESULT_ACCEPTED
+                else:
+                    result = MAV_RESULT_DENIED
+            self._ack(command, result)
+        elif command == MAV_CMD_DO_SET_MODE:
+            main, sub = int(round(msg.param2)), int(round(msg.param3))
+            if not int(round(msg.param1)) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                self._ack(command, MAV_RESULT_UNSUPPORTED)
+            elif main == Px4MainMode.OFFBOARD:
+                if self.stream_healthy():
+                    self._set_mode(Px4MainMode.OFFBOARD, 0)
+                    self._ack(command, MAV_RESULT_ACCEPTED)
+                else:
+                    self._ack(command, MAV_RESULT_TEMPORARILY_REJECTED)
+            elif main == Px4MainMode.AUTO and sub in (Px4AutoSubMode.LAND, Px4AutoSubMode.LOITER):
+                self._set_mode(main, sub)
+                self._ack(command, MAV_RESULT_ACCEPTED)
+            elif main in (Px4MainMode.POSCTL, Px4MainMode.ALTCTL, Px4MainMode.STABILIZED, Px4MainMode.MANUAL):
+                self._set_mode(main, 0)
+                self._ack(command, MAV_RESULT_ACCEPTED)
+            else:
+                self._ack(command, MAV_RESULT_UNSUPPORTED)
+        elif command == MAV_CMD_DO_FLIGHTTERMINATION:
+            if msg.param1 >= 0.5:
+                self.armed = False
+                self._set_mode(Px4MainMode.TERMINATION, 0)
+            self._ack(command, MAV_RESULT_ACCEPTED)
+        else:
+            self._ack(command, MAV_RESULT_UNSUPPORTED)
+
+    def _set_mode(self, main: int, sub: int) -> None:
+        self.main_mode, self.sub_mode = main, sub
+        self._failsafe_since = None
+
+    # ------------------------------------------------------------------------------------------ mode logic
+    @property
+    def custom_mode(self) -> int:
+        return encode_custom_mode(self.main_mode, self.sub_mode)
+
+    @property
+    def offboard(self) -> bool:
+        return self.main_mode == Px4MainMode.OFFBOARD
+
+    def update(self, sim_time: float, landed: bool, attitude_world: np.ndarray) -> Px4Setpoint:
+        """Offboard-loss failsafe, landing and disarm logic at ``sim_time``; the setpoint to fly (world frame).
+
+        ``landed``: the vehicle stands on the ground; ``attitude_world``: its true attitude (hold/land keep yaw).
+        """
+        self.time = sim_time
+        self.landed = landed
+        cfg = self.config
+        if self.armed and self.offboard and self._last_setpoint_time is not None and \
+                sim_time - self._last_setpoint_time > cfg.offboard_loss_timeout:
+            self.counters.failsafes += 1
+            self.main_mode, self.sub_mode = Px4MainMode.AUTO, Px4AutoSubMode.LOITER
+            self._failsafe_since = sim_time
+        if self._failsafe_since is not None and self.main_mode == Px4MainMode.AUTO and \
+                self.sub_mode == Px4AutoSubMode.LOITER and sim_time - self._failsafe_since > cfg.failsafe_hold_time:
+            self.sub_mode = Px4AutoSubMode.LAND
+        is_land = self.main_mode == Px4MainMode.AUTO and self.sub_mode == Px4AutoSubMode.LAND
+        if self.armed and is_land and landed:
+            self._landed_since = sim_time if self._landed_since is None else self._landed_since
+            if sim_time - self._landed_since > cfg.land_disarm_delay:
+                self.armed = False
+        elif not landed:
+            self._landed_since = None
+        q_world_local = self._q_world_from_local
+        if self.offboard and not self.rate_mode:
+            quat = quat_multiply(q_world_local, self.quat_local)
+            return Px4Setpoint(quat, self.thrust, self.armed, self.rate_feedforward.copy())
+        if self.offboard and self.rate_mode:
+            return Px4Setpoint(attitude_world.copy(), self.thrust, self.armed, self.rate_feedforward.copy())
+        # hold / land / position modes without a position controller: level attitude with the current yaw
+        w, x, y, z = attitude_world
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        level = np.array([math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw)])
+        thrust = self.thrust * (cfg.land_descent_thrust_ratio if is_land else 1.0)
+        if landed and is_land:
+            thrust = 0.0
+        return Px4Setpoint(level, thrust, self.armed, np.zeros(3))
+
+    # ------------------------------------------------------------------------------------------ send
+    def _send(self, message) -> None:
+        if self.peer is None:
+            return
+        try:
+            self.sock.sendto(message.pack(self.mav), self.peer)
+        except OSError:
+            pass
+
+    def send_status(self, voltage: float, remaining: float, current: float) -> None:
+        """HEARTBEAT, SYS_STATUS and BATTERY_STATUS (voltage [V], remaining [0..1], current [A])."""
+        base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self.armed:
+            base |= MAV_MODE_FLAG_SAFETY_ARMED
+        if self.main_mode in (Px4MainMode.OFFBOARD, Px4MainMode.AUTO):
+            base |= MAV_MODE_FLAG_AUTO_ENABLED | MAV_MODE_FLAG_GUIDED_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
+        status = MAV_STATE_ACTIVE if self.armed else MAV_STATE_STANDBY
+        self._send(self.mav.heartbeat_encode(type=MAV_TYPE_QUADROTOR, autopilot=MAV_AUTOPILOT_PX4, base_mode=base,
+                                             custom_mode=self.custom_mode, system_status=status, mavlink_version=3))
+        millivolts = int(min(max(voltage * 1000.0, 0.0), 65534))
+        centiamps = int(min(max(current * 100.0, 0.0), 32767))
+        percent = int(round(100.0 * min(max(remaining, 0.0), 1.0)))
+        self._send(self.mav.sys_status_encode(
+            onboard_control_sensors_present=0, onboard_control_sensors_enabled=0, onboard_control_sensors_health=0,
+            load=0, voltage_battery=millivolts, current_battery=centiamps, battery_remaining=percent,
+            drop_rate_comm=0, errors_comm=self.counters.garbage & 0xFFFF, errors_count1=0, errors_count2=0,
+            errors_count3=0, errors_count4=0))
+        cell = min(int(millivolts / 3), 65534)
+        self._send(self.mav.battery_status_encode(
+            id=0, battery_function=0, type=1, temperature=32767, voltages=[cell, cell, cell] + [65535] * 7,
+            current_battery=centiamps, current_consumed=-1, energy_consumed=-1, battery_remaining=percent))
+
+    def send_telemetry(self, sample: ImuSample) -> None:
+        """ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED from a sample in F0i / FLU."""
+        ms = int(self.time * 1000.0) & 0xFFFFFFFF
+        q_ned = quat_enu_flu_to_ned_frd(sample.quat_local)
+        rates = flu_to_frd(sample.rate)
+        accel = flu_to_frd(sample.specific_force)
+        self._send(self.mav.attitude_quaternion_encode(
+            time_boot_ms=ms, q1=float(q_ned[0]), q2=float(q_ned[1]), q3=float(q_ned[2]), q4=float(q_ned[3]),
+            rollspeed=float(rates[0]), pitchspeed=float(rates[1]), yawspeed=float(rates[2])))
+        roll, pitch, yaw = quat_to_euler_zyx(q_ned)
+        self._send(self.mav.attitude_encode(time_boot_ms=ms, roll=roll, pitch=pitch, yaw=yaw,
+                                            rollspeed=float(rates[0]), pitchspeed=float(rates[1]),
+                                            yawspeed=float(rates[2])))
+        self._send(self.mav.highres_imu_encode(
+            time_usec=int(self.time * 1e6), xacc=float(accel[0]), yacc=float(accel[1]), zacc=float(accel[2]),
+            xgyro=float(rates[0]), ygyro=float(rates[1]), zgyro=float(rates[2]), xmag=0.0, ymag=0.0, zmag=0.0,
+            abs_pressure=0.0, diff_pressure=0.0, pressure_alt=0.0, temperature=25.0, fields_updated=0x3F, id=0))
+        p = enu_to_ned(sample.position_local)
+        v = enu_to_ned(sample.velocity_local)
+        self._send(self.mav.local_position_ned_encode(
+            time_boot_ms=ms, x=float(p[0]), y=float(p[1]), z=float(p[2]), vx=float(v[0]), vy=float(v[1]),
+            vz=float(v[2])))

@@ -1,0 +1,326 @@
+"""Scenario description of one simulation run: initial state, true plant parameters, schedules (YAML).
+
+A scenario file is a YAML mapping whose keys are the fields of :class:`Scenario` (nested mappings for the
+nested dataclasses). Every level refuses unknown keys with a ValueError that lists the valid ones, so a
+typo never silently falls back to a default. All values are SI (m, kg, s, rad, N, V) in the world frame
+ENU (z up) unless a field says otherwise.
+
+Example (see ``config/scenarios/*.yaml``)::
+
+    initial_state: {mode: ground, leg_angles: 1.047}
+    plant: {platform_mass: 0.27}          # true parameters: overrides of thesis Table B.1
+    payloads: [{mass: 0.3, attach_time: 10.0, release_time: 20.0}]
+    wind: {velocity: [1.0, 0.0, 0.0]}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "BatteryConfig",
+    "BoardConfig",
+    "CameraConfig",
+    "ExternalWrenchEvent",
+    "GroundConfig",
+    "Gust",
+    "InitialState",
+    "PayloadEvent",
+    "Px4Config",
+    "QuadrotorConfig",
+    "Scenario",
+    "SensorConfig",
+    "WindConfig",
+    "load_scenario",
+    "scenario_from_dict",
+]
+
+
+@dataclass
+class InitialState:
+    """Initial configuration of the robot.
+
+    ``mode``: ``"ground"`` (quadrotors resting on the ground plane, platform level above them, motors off) or
+    ``"hover"`` (in the air at ``position``, at rest; the PX4 emulators start armed in OFFBOARD with the hover
+    setpoint held until the first setpoint arrives only if ``armed`` is true).
+    """
+
+    mode: str = "ground"
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0, 1.5])  #: platform P [m] (x, y used on ground)
+    yaw: float = 0.0  #: platform yaw [rad]
+    leg_angles: float | list[float] = math.radians(60.0)  #: θ_i [rad], one value for all legs or n values
+    armed: bool = False  #: hover mode only: start armed in OFFBOARD, hover thrust held (tests, demos)
+
+
+@dataclass
+class QuadrotorConfig:
+    """True rigid-body, motor and battery-thrust parameters of each quadrotor (all n identical but thrust)."""
+
+    inertia: list[float] = field(default_factory=lambda: [0.011, 0.011, 0.021])  #: diag I_b [kg m²] (FLU)
+    arm_length: float = 0.17  #: d of (3.41): rotor axis to centre [m] (34 cm frame)
+    torque_coefficient: float = 0.016  #: c_Q / c_T of (3.41) [m]
+    motor_time_constant: float = 0.008  #: first-order motor lag [s]
+    thrust_coefficients: list[list[float]] = field(
+        default_factory=lambda: [[8.02, -61.66], [8.22, -64.01], [8.15, -62.28]]
+    )  #: per-UAV [a_f [N/V], b_f [N]] of (C.2) (Table C.1); the last row repeats for UAVs beyond the list
+    landing_gear_height: float = 0.10  #: CoM height above the feet [m]
+
+
+@dataclass
+class BatteryConfig:
+    """Battery voltage model: ``V = V_full − (V_full − V_empty)·Q_used/Q_cap − R·I``, ``I = k_I·thrust``."""
+
+    full_voltage: float = 12.4  #: [V] open-circuit, charged (3S)
+    empty_voltage: float = 10.8  #: [V] open-circuit at ``capacity``
+    capacity: float = 4.0  #: [A h] (after which the open-circuit voltage stays at ``empty_voltage``)
+    current_per_newton: float = 1.6  #: [A/N] current drawn per newton of thrust
+    internal_resistance: float = 0.015  #: [Ω] sag under load
+    initial_charge_used: list[float] = field(default_factory=lambda: [0.0])  #: [A h] per UAV (last repeats)
+
+
+@dataclass
+class Px4Config:
+    """PX4-like attitude controller (3.39)-(3.40) gains and offboard rules, identical on every UAV."""
+
+    attitude_p_gain: list[float] = field(default_factory=lambda: [6.5, 6.5, 2.8])  #: 2/τ·... : rate = P·2·q_err [1/s]
+    rate_p_gain: list[float] = field(default_factory=lambda: [0.9, 0.9, 0.6])  #: K_P [N m s/rad]
+    rate_i_gain: list[float] = field(default_factory=lambda: [0.2, 0.2, 0.1])  #: K_I [N m/rad]
+    rate_d_gain: list[float] = field(default_factory=lambda: [0.004, 0.004, 0.0])  #: K_D [N m s²/rad]
+    rate_integrator_limit: float = 0.3  #: |K_I ∫ε| bound [N m]
+    max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
+    controller_rate: float = 250.0  #: attitude/rate loop [Hz]
+    offboard_loss_timeout: float = 1.0  #: COM_OF_LOSS_T [s]
+    offboard_min_rate: float = 2.0  #: setpoint stream must be faster than this [Hz]
+    offboard_warmup: float = 1.0  #: stream duration required before OFFBOARD or arming [s]
+    failsafe_hold_time: float = 2.0  #: hold (last attitude, hover thrust) before landing [s]
+    land_descent_thrust_ratio: float = 0.9  #: LAND: thrust = ratio · hover thrust of the attached UAV
+    land_disarm_delay: float = 2.0  #: disarm after this long on the ground in LAND [s]
+    yaw_offsets: list[float] = field(default_factory=lambda: [0.0])  #: F0i yaw offset per UAV [rad]
+    telemetry_rate: float = 50.0  #: ATTITUDE/…/HIGHRES_IMU stream rate [Hz]
+    status_rate: float = 2.0  #: HEARTBEAT, SYS_STATUS, BATTERY_STATUS rate [Hz]
+
+
+@dataclass
+class SensorConfig:
+    """IMU noise (white, per sample) and constant gyro bias, per UAV (deterministic with the seed)."""
+
+    gyro_noise: float = 0.003  #: [rad/s] 1σ
+    accel_noise: float = 0.05  #: [m/s²] 1σ
+    gyro_bias: float = 0.005  #: [rad/s] 1σ of the per-UAV constant bias draw
+    attitude_noise: float = 0.002  #: [rad] 1σ on the reported attitude
+    velocity_noise: float = 0.02  #: [m/s] 1σ on LOCAL_POSITION_NED velocity
+    position_noise: float = 0.02  #: [m] 1σ on LOCAL_POSITION_NED position
+    voltage_noise: float = 0.01  #: [V] 1σ
+
+
+@dataclass
+class CameraConfig:
+    """Onboard cameras (thesis Appendix D) and the emulated-detection option."""
+
+    enabled: bool = True
+    rate: float = 20.0  #: [Hz]
+    emulated: bool = False  #: publish noisy marker poses (MarkerDetection) instead of images
+    position_noise: float = 0.02  #: emulated pose noise [m] per axis (thesis emulated camera)
+    angle_noise: float = math.radians(2.0)  #: emulated pose noise [rad] per axis
+    pixel_noise: float = 2.0  #: image noise 1σ [grey levels]
+    blur_sigma: float = 0.0  #: Gaussian blur [px], 0 = none
+
+
+@dataclass
+class GroundConfig:
+    """Ground plane z = height with penalty contact (spring-damper normal, spring-damper stick/slip friction)."""
+
+    enabled: bool = True
+    height: float = 0.0  #: [m]
+    stiffness: float = 20000.0  #: [N/m]
+    damping: float = 300.0  #: [N s/m]
+    friction: float = 0.8  #: Coulomb coefficient
+    tangential_stiffness: float = 5000.0  #: stick spring [N/m]
+    tangential_damping: float = 150.0  #: [N s/m]
+
+
+@dataclass
+class PayloadEvent:
+    """A point mass attached to the platform centre P between ``attach_time`` and ``release_time`` [s]."""
+
+    mass: float = 0.3  #: [kg]
+    attach_time: float = 0.0
+    release_time: float = math.inf
+
+
+@dataclass
+class Gust:
+    """An additional air velocity [m/s] (world) during [start, start + duration], half-sine shaped."""
+
+    start: float = 0.0
+    duration: float = 1.0
+    velocity: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
+
+
+@dataclass
+class WindConfig:
+    """Wind as an air velocity with linear drag on the platform, the legs (at mid-length) and the quadrotors."""
+
+    velocity: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  #: constant part [m/s]
+    gusts: list[Gust] = field(default_factory=list)
+    platform_drag: float = 0.05  #: [N s/m]
+    leg_drag: float = 0.02  #: [N s/m] per leg
+    uav_drag: float = 0.25  #: [N s/m] per quadrotor
+
+
+@dataclass
+class ExternalWrenchEvent:
+    """A wrench on the platform during [start, end): ``force`` [N] world at P, ``moment`` [N m] in Fp."""
+
+    start: float = 0.0
+    end: float = math.inf
+    force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    moment: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+@dataclass
+class BoardConfig:
+    """A stiff board (plane through ``point`` with unit ``normal`` pointing to the free side) the platform's
+    end-effector point ``end_effector`` (in Fp) can push on: penalty normal force, Coulomb friction."""
+
+    enabled: bool = False
+    point: list[float] = field(default_factory=lambda: [0.0, 0.0, 3.0])  #: [m] world
+    normal: list[float] = field(default_factory=lambda: [0.0, 0.0, -1.0])  #: world, towards the robot
+    end_effector: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.05])  #: contact point in Fp [m]
+    stiffness: float = 5000.0  #: [N/m]
+    damping: float = 50.0  #: [N s/m]
+    friction: float = 0.3
+
+
+@dataclass
+class Scenario:
+    """Everything that defines one run, beyond the node's parameters."""
+
+    name: str = "default"
+    seed: int = 0
+    n: int = 3
+    initial_state: InitialState = field(default_factory=InitialState)
+    plant: dict[str, Any] = field(default_factory=dict)  #: FprParameters overrides (fpr_model field names)
+    quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
+    battery: BatteryConfig = field(default_factory=BatteryConfig)
+    px4: Px4Config = field(default_factory=Px4Config)
+    sensors: SensorConfig = field(default_factory=SensorConfig)
+    cameras: CameraConfig = field(default_factory=CameraConfig)
+    ground: GroundConfig = field(default_factory=GroundConfig)
+    board: BoardConfig = field(default_factory=BoardConfig)
+    wind: WindConfig = field(default_factory=WindConfig)
+    payloads: list[PayloadEvent] = field(default_factory=list)
+    external_wrenches: list[ExternalWrenchEvent] = field(default_factory=list)
+
+    def leg_angles(self) -> np.ndarray:
+        """Initial leg angles as an (n,) array [rad]."""
+        value = np.atleast_1d(np.asarray(self.initial_state.leg_angles, dtype=float))
+        if value.size == 1:
+            value = np.full(self.n, float(value[0]))
+        if value.shape != (self.n,):
+            raise ValueError(f"initial_state.leg_angles: expected 1 or n = {self.n} values, got {value.size}")
+        return value
+
+
+def per_uav(values: list, index: int) -> Any:
+    """Entry ``index`` (0-based) of a per-UAV list whose last entry repeats for the UAVs beyond it."""
+    if not values:
+        raise ValueError("per-UAV list is empty")
+    return values[min(index, len(values) - 1)]
+
+
+def _convert(tp: Any, value: Any, path: str) -> Any:
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return _dataclass_from_dict(tp, value, path)
+    if origin is list:
+        (item_type,) = typing.get_args(tp)
+        if not isinstance(value, list):
+            raise ValueError(f"{path}: expected a list, got {value!r}")
+        return [_convert(item_type, item, f"{path}[{k}]") for k, item in enumerate(value)]
+    if origin in (typing.Union, types.UnionType):
+        errors = []
+        for option in typing.get_args(tp):
+            try:
+                return _convert(option, value, path)
+            except ValueError as error:
+                errors.append(str(error))
+        raise ValueError(f"{path}: {value!r} matches none of {typing.get_args(tp)}")
+    if origin is dict or tp is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{path}: expected a mapping, got {value!r}")
+        return dict(value)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"{path}: expected true/false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{path}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, str) and value.strip().lower() in ("inf", ".inf", "infinity"):
+            return math.inf
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{path}: expected a number, got {value!r}")
+        if math.isnan(float(value)):
+            raise ValueError(f"{path}: NaN is not allowed")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ValueError(f"{path}: expected a string, got {value!r}")
+        return value
+    return value
+
+
+def _dataclass_from_dict(cls: type, data: Any, path: str) -> Any:
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path or 'scenario'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        raise ValueError(f"{path or 'scenario'}: unknown key(s) {unknown}; valid keys are {names}")
+    kwargs = {name: _convert(hints[name], value, f"{path}.{name}" if path else name) for name, value in data.items()}
+    return cls(**kwargs)
+
+
+def scenario_from_dict(data: dict | None) -> Scenario:
+    """Build and validate a :class:`Scenario` from a mapping (unknown keys refused, listing valid keys)."""
+    scenario = _dataclass_from_dict(Scenario, data, "")
+    if scenario.n < 3:
+        raise ValueError(f"n: at least 3 legs are needed, got {scenario.n}")
+    if scenario.initial_state.mode not in ("ground", "hover"):
+        raise ValueError(f"initial_state.mode: expected 'ground' or 'hover', got {scenario.initial_state.mode!r}")
+    angles = scenario.leg_angles()
+    if not np.all((angles > 0.0) & (angles < math.pi / 2)):
+        raise ValueError(f"initial_state.leg_angles: each must be inside (0, π/2) rad, got {angles.tolist()}")
+    normal = np.asarray(scenario.board.normal, dtype=float)
+    if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) < 1e-9:
+        raise ValueError(f"board.normal: expected a non-zero 3-vector, got {scenario.board.normal}")
+    for name in ("full_voltage", "empty_voltage", "capacity"):
+        if getattr(scenario.battery, name) <= 0.0:
+            raise ValueError(f"battery.{name}: must be > 0")
+    if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
+        raise ValueError("px4.controller_rate and cameras.rate must be > 0")
+    return scenario
+
+
+def load_scenario(path: str | None) -> Scenario:
+    """Load a scenario YAML file; ``None`` or an empty path gives the default scenario."""
+    if not path:
+        return scenario_from_dict({})
+    import yaml
+
+    with open(path, encoding="utf-8") as stream:
+        data = yaml.safe_load(stream)
+    return scenario_from_dict(data or {})

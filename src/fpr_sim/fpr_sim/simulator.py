@@ -1,0 +1,201 @@
+"""``simulator`` node: replaces the FPR hardware (plant, PX4 autopilots over MAVLink, cameras). Thin wrapper
+around :class:`fpr_sim.simulation.Simulation` (DESIGN.md §3, §5).
+
+Publishes ``/clock`` (rosgraph_msgs/Clock, ``clock_rate`` ≤ 250 Hz), ``/fpr/ground_truth`` (fpr_msgs/FprState),
+and per UAV ``/fpr/uav<i>/camera/image_raw`` + ``camera/camera_info`` (20 Hz), or ``/fpr/uav<i>/marker``
+(fpr_msgs/MarkerDetection) when ``cameras.emulated`` is set in the scenario or ``emulated_cameras`` is true.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+
+from fpr_msgs.msg import FprState, MarkerDetection
+from fpr_sim.cameras import CameraRig
+from fpr_sim.scenario import load_scenario
+from fpr_sim.simulation import Simulation, SimulationOptions
+
+
+def _stamp(t: float) -> Time:
+    sec = int(t)
+    return Time(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+
+
+def _pose(position, quat_wxyz) -> Pose:
+    w, x, y, z = (float(v) for v in quat_wxyz)
+    return Pose(position=Point(x=float(position[0]), y=float(position[1]), z=float(position[2])),
+                orientation=Quaternion(x=x, y=y, z=z, w=w))
+
+
+class SimulatorNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("simulator", **kwargs)
+        p = self.declare_parameter
+        p("scenario_file", "", descriptor=_desc("scenario YAML (see config/scenarios); empty: default scenario"))
+        p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
+        p("lockstep", True, descriptor=_desc("wait for every armed UAV's setpoint each control period"))
+        p("lockstep_timeout", 0.5, descriptor=_desc("wall-clock wait per control period before giving up [s]"))
+        p("control_rate", 50.0, descriptor=_desc("controllers' rate used by the lockstep [Hz]"))
+        p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
+        p("clock_rate", 250.0, descriptor=_desc("/clock publishing rate [Hz], at most 250"))
+        p("ground_truth_rate", 100.0, descriptor=_desc("/fpr/ground_truth rate [Hz]"))
+        p("base_port", 14540, descriptor=_desc("UAV i's PX4 emulator listens on 127.0.0.1:base_port+i-1"))
+        p("emulated_cameras", False, descriptor=_desc("publish noisy marker poses instead of images"))
+        p("duration", 0.0, descriptor=_desc("stop after this simulated time [s]; 0 = run until shutdown"))
+        get = self.get_parameter
+        self.scenario = load_scenario(get("scenario_file").value)
+        options = SimulationOptions(physics_rate=float(get("physics_rate").value),
+                                    control_rate=float(get("control_rate").value),
+                                    lockstep=bool(get("lockstep").value),
+                                    lockstep_timeout=float(get("lockstep_timeout").value),
+                                    base_port=int(get("base_port").value))
+        self.sim = Simulation(self.scenario, options)
+        self.real_time_factor = max(0.0, float(get("real_time_factor").value))
+        self.clock_period = 1.0 / min(250.0, max(1.0, float(get("clock_rate").value)))
+        self.truth_period = 1.0 / max(1.0, float(get("ground_truth_rate").value))
+        self.camera_period = 1.0 / self.scenario.cameras.rate
+        self.duration = float(get("duration").value)
+        self.emulated = bool(get("emulated_cameras").value) or self.scenario.cameras.emulated
+        self.cameras = CameraRig(self.scenario.cameras, self.sim.n, self.scenario.seed) \
+            if self.scenario.cameras.enabled else None
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self.truth_pub = self.create_publisher(FprState, "/fpr/ground_truth", 10)
+        self.image_pubs, self.info_pubs, self.marker_pubs = [], [], []
+        for i in range(1, self.sim.n + 1):
+            if self.emulated:
+                self.marker_pubs.append(self.create_publisher(MarkerDetection, f"/fpr/uav{i}/marker",
+                                                              qos_profile_sensor_data))
+            else:
+                self.image_pubs.append(self.create_publisher(Image, f"/fpr/uav{i}/camera/image_raw",
+                                                             qos_profile_sensor_data))
+                self.info_pubs.append(self.create_publisher(CameraInfo, f"/fpr/uav{i}/camera/camera_info",
+                                                            qos_profile_sensor_data))
+        self._next_truth = 0.0
+        self._next_camera = 0.0
+        self._last_timeouts = 0
+        self.get_logger().info(
+            f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 ports {self.sim.ports}, "
+            f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep}")
+
+    # ------------------------------------------------------------------------------------------------
+    def run(self) -> None:
+        wall_start = time.monotonic()
+        sim_start = self.sim.time
+        while rclpy.ok():
+            self.sim.advance(self.clock_period)
+            t = self.sim.time
+            self.clock_pub.publish(Clock(clock=_stamp(t)))
+            if t + 1e-9 >= self._next_truth:
+                self._next_truth += self.truth_period
+                self.truth_pub.publish(self._truth_message())
+            if self.cameras is not None and t + 1e-9 >= self._next_camera:
+                self._next_camera += self.camera_period
+                self._publish_cameras(t)
+            if self.sim.lockstep_timeouts != self._last_timeouts:
+                self._last_timeouts = self.sim.lockstep_timeouts
+                self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
+                                          "for setpoints", throttle_duration_sec=5.0)
+            rclpy.spin_once(self, timeout_sec=0.0)
+            if self.real_time_factor > 0.0:
+                ahead = (t - sim_start) / self.real_time_factor - (time.monotonic() - wall_start)
+                if ahead > 0.0:
+                    time.sleep(ahead)
+            if self.duration > 0.0 and t >= self.duration:
+                self.get_logger().info(f"duration {self.duration} s reached: stopping "
+                                       f"(lockstep timeouts: {self.sim.lockstep_timeouts})")
+                break
+
+    def _truth_message(self) -> FprState:
+        truth = self.sim.ground_truth()
+        s = truth.state
+        msg = FprState()
+        msg.header.stamp = _stamp(truth.time)
+        msg.header.frame_id = "world"
+        msg.platform_pose = _pose(s.position, s.quat)
+        msg.platform_twist.linear = Vector3(x=float(s.velocity[0]), y=float(s.velocity[1]), z=float(s.velocity[2]))
+        msg.platform_twist.angular = Vector3(x=float(s.rate[0]), y=float(s.rate[1]), z=float(s.rate[2]))
+        msg.leg_angles = [float(v) for v in s.leg_angles]
+        msg.leg_rates = [float(v) for v in s.leg_rates]
+        msg.uav_poses = [_pose(p, q) for p, q in zip(truth.uav_positions, truth.uav_quats, strict=True)]
+        msg.uav_velocities = [Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2])) for v in truth.uav_velocities]
+        msg.uav_thrusts = [float(v) for v in truth.uav_thrusts]
+        msg.external_wrench = [float(v) for v in truth.external_wrench]
+        msg.contact_force = float(truth.contact_force)
+        msg.payload_mass = float(truth.payload_mass)
+        msg.battery_voltages = [float(v) for v in truth.battery_voltages]
+        return msg
+
+    def _publish_cameras(self, t: float) -> None:
+        truth = self.sim.ground_truth()
+        stamp = _stamp(t)
+        if self.emulated:
+            for i, detection in enumerate(self.cameras.emulate(truth)):
+                T = detection.camera_T_marker
+                from fpr_model.rotations import rotmat_to_quat
+
+                msg = MarkerDetection()
+                msg.header.stamp = stamp
+                msg.header.frame_id = f"uav{i + 1}/camera_optical"
+                msg.marker_id = 0
+                msg.pose = _pose(T[:3, 3], rotmat_to_quat(T[:3, :3]))
+                msg.reprojection_error = 0.0
+                msg.ambiguity_ratio = float("inf")
+                msg.corners = [float("nan")] * 8
+                msg.marker_size = float(self.cameras.calibration.marker_size)
+                self.marker_pubs[i].publish(msg)
+            return
+        camera = self.cameras.calibration.camera
+        for i, frame in enumerate(self.cameras.render(truth)):
+            image = Image()
+            image.header.stamp = stamp
+            image.header.frame_id = f"uav{i + 1}/camera_optical"
+            image.height, image.width = frame.image.shape
+            image.encoding = "mono8"
+            image.step = image.width
+            image.data = frame.image.tobytes()
+            self.image_pubs[i].publish(image)
+            info = CameraInfo()
+            info.header = image.header
+            info.height, info.width = camera.height, camera.width
+            info.distortion_model = "plumb_bob"
+            info.d = [float(v) for v in camera.dist_coeffs]
+            info.k = [float(v) for v in np.asarray(camera.camera_matrix).reshape(-1)]
+            info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+            info.p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+            self.info_pubs[i].publish(info)
+
+    def destroy_node(self) -> None:
+        self.sim.close()
+        super().destroy_node()
+
+
+def _desc(text: str):
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    return ParameterDescriptor(description=text)
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = SimulatorNode()
+    try:
+        node.run()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,80 @@
+"""Plant acceptance: hover with J^-T g and ideal attitudes, free fall at g, resting on the ground, battery."""
+
+import numpy as np
+import pytest
+from fpr_model.dynamics import gravity, thrusts_from_wrench
+from fpr_sim.plant import Plant
+from fpr_sim.quadrotor import AttitudeCommand, mix
+from fpr_sim.scenario import scenario_from_dict
+
+
+def test_hover_with_ideal_attitudes_stays_within_1mm_for_10s():
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8},
+                                      "ground": {"enabled": False}}))
+    plant.ideal_attitude = True
+    q = plant.state.configuration()
+    forces = thrusts_from_wrench(plant.params, q, gravity(plant.params, q))
+    quats = plant.default_uav_attitudes(forces)
+    start = plant.state
+    worst = 0.0
+    for k in range(10000):
+        if k % 4 == 0:  # the battery sags: the PX4 user re-normalizes with the present f_max (C.1)
+            u = np.linalg.norm(forces, axis=1) / plant.fleet.max_thrust()
+            plant.set_command(AttitudeCommand(quats, u, np.ones(3, dtype=bool)))
+        plant.step()
+        if k % 100 == 0:
+            worst = max(worst, np.abs(plant.state.position - start.position).max())
+    end = plant.state
+    worst = max(worst, np.abs(end.position - start.position).max())
+    assert plant.time == pytest.approx(10.0)
+    assert worst < 1e-3
+    assert np.abs(end.leg_angles - start.leg_angles).max() < 1e-3
+
+
+def test_zero_thrust_falls_at_g():
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "hover"}, "ground": {"enabled": False}}))
+    plant.fleet.hover_rotor_state(np.zeros(3))
+    z0 = plant.state.position[2]
+    for _ in range(500):
+        plant.step()
+    state = plant.state
+    assert state.velocity[2] == pytest.approx(-9.81 * 0.5, rel=1e-9)
+    assert state.position[2] - z0 == pytest.approx(-0.5 * 9.81 * 0.25, rel=1e-9)
+    assert np.abs(state.leg_rates).max() < 1e-9
+
+
+def test_resting_on_the_ground_stays_put_and_reports_ground_wrench():
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "ground", "leg_angles": 1.0}}))
+    start = plant.state
+    for _ in range(1500):
+        plant.step()
+    end = plant.state
+    assert np.abs(end.position - start.position).max() < 1e-3
+    assert np.abs(end.leg_angles - start.leg_angles).max() < 1e-3
+    truth = plant.ground_truth()
+    # the ground carries the whole weight
+    assert truth.external_wrench[2] == pytest.approx(plant.params.total_mass * 9.81, rel=1e-2)
+
+
+def test_mixer_inverts_3_41_and_saturates():
+    moments = np.array([[0.1, -0.2, 0.03]])
+    rotors = mix(np.array([20.0]), moments, 0.17, 0.016, np.array([10.0]))
+    t1, t2, t3, t4 = rotors[0]
+    assert rotors.sum() == pytest.approx(20.0)
+    assert 0.17 * (t2 - t4) == pytest.approx(0.1)
+    assert 0.17 * (t3 - t1) == pytest.approx(-0.2)
+    assert 0.016 * (-t1 + t2 - t3 + t4) == pytest.approx(0.03)
+    capped = mix(np.array([60.0]), moments, 0.17, 0.016, np.array([10.0]))
+    assert capped.max() <= 10.0 and capped.min() >= 0.0
+
+
+def test_battery_voltage_drops_and_thrust_follows_table_c1():
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "hover"}, "ground": {"enabled": False},
+                                      "battery": {"capacity": 0.01}}))
+    fleet = plant.fleet
+    v0 = fleet.battery.voltage().copy()
+    f0 = fleet.max_thrust()
+    assert f0[0] == pytest.approx(8.02 * v0[0] - 61.66)
+    fleet.battery.update(np.full(3, 10.0), 10.0)
+    assert np.all(fleet.battery.voltage() < v0)
+    assert np.all(fleet.max_thrust() < f0)

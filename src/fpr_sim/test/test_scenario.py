@@ -1,0 +1,49 @@
+"""Scenario files: every shipped scenario loads; unknown keys are refused with the list of valid keys."""
+
+from pathlib import Path
+
+import pytest
+from fpr_sim.scenario import load_scenario, scenario_from_dict
+
+SCENARIOS = sorted((Path(__file__).resolve().parents[1] / "config" / "scenarios").glob("*.yaml"))
+
+
+def test_there_are_scenarios():
+    assert len(SCENARIOS) >= 4
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_shipped_scenarios_load(path):
+    scenario = load_scenario(str(path))
+    assert scenario.name == path.stem
+    assert scenario.leg_angles().shape == (scenario.n,)
+
+
+def test_unknown_top_level_key_lists_valid_keys():
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['windd'\]; valid keys are .*'wind'"):
+        scenario_from_dict({"windd": {}})
+
+
+def test_unknown_nested_key_lists_valid_keys():
+    with pytest.raises(ValueError, match=r"initial_state: unknown key\(s\) \['pos'\].*'position'"):
+        scenario_from_dict({"initial_state": {"pos": [0, 0, 1]}})
+    with pytest.raises(ValueError, match=r"payloads\[0\]: unknown key"):
+        scenario_from_dict({"payloads": [{"mas": 1.0}]})
+
+
+def test_bad_values_refused():
+    with pytest.raises(ValueError, match="expected a number"):
+        scenario_from_dict({"battery": {"capacity": "big"}})
+    with pytest.raises(ValueError, match="leg_angles"):
+        scenario_from_dict({"initial_state": {"leg_angles": 2.0}})
+    with pytest.raises(ValueError, match="NaN"):
+        scenario_from_dict({"ground": {"stiffness": float("nan")}})
+
+
+def test_plant_overrides_reach_true_parameters():
+    from fpr_sim.plant import true_parameters
+
+    params = true_parameters(scenario_from_dict({"plant": {"platform_mass": 0.4, "leg_length": 1.0}}))
+    assert params.platform_mass == 0.4 and params.leg_length == 1.0
+    with pytest.raises(ValueError, match="valid keys"):
+        true_parameters(scenario_from_dict({"plant": {"platform_mas": 0.4}}))

@@ -1,0 +1,55 @@
+"""simulator node in process with real rclpy: /clock, /fpr/ground_truth and camera topics are published."""
+
+import threading
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import Image  # noqa: E402
+
+from fpr_msgs.msg import FprState  # noqa: E402
+
+
+def test_simulator_node_publishes_clock_truth_and_images():
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import SimulatorNode
+
+        listener = rclpy.create_node("sim_listener")
+        clocks, truths, images = [], [], []
+        listener.create_subscription(Clock, "/clock", clocks.append, 500)
+        listener.create_subscription(FprState, "/fpr/ground_truth", truths.append, 500)
+        listener.create_subscription(Image, "/fpr/uav2/camera/image_raw", images.append, qos_profile_sensor_data)
+        overrides = [Parameter("real_time_factor", value=1.0), Parameter("duration", value=1.0),
+                     Parameter("base_port", value=0)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        executor = SingleThreadedExecutor()
+        executor.add_node(listener)
+        deadline = time.monotonic() + 5.0
+        while (sim_node.clock_pub.get_subscription_count() == 0 or sim_node.truth_pub.get_subscription_count() == 0
+               or sim_node.image_pubs[1].get_subscription_count() == 0):
+            executor.spin_once(timeout_sec=0.05)
+            assert time.monotonic() < deadline, "discovery timed out"
+        thread = threading.Thread(target=sim_node.run)
+        thread.start()
+        while thread.is_alive():
+            executor.spin_once(timeout_sec=0.02)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.02)
+        thread.join()
+        sim_node.destroy_node()
+        listener.destroy_node()
+        assert len(clocks) >= 100  # 250 Hz over 1 s simulated
+        stamps = [c.clock.sec + 1e-9 * c.clock.nanosec for c in clocks]
+        assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
+        assert stamps[-1] == pytest.approx(1.0, abs=0.01)
+        assert truths and len(truths[-1].leg_angles) == 3 and len(truths[-1].external_wrench) == 9
+        assert truths[-1].platform_pose.position.z > 0.9  # resting on the ground, legs at 60°
+        assert images and images[-1].encoding == "mono8" and images[-1].width == 640
+    finally:
+        rclpy.shutdown()
