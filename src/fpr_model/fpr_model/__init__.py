@@ -1,1 +1,4 @@
-"""The Flying Parallel Robot as a ROS-free Python library: parameters, rotations and frames, geometry, kinematics, dynamics, wrench feasibility."""
+"""The Flying Parallel Robot as a ROS-free Python library.
+
+Parameters, rotations and frames, geometry, kinematics, dynamics, wrench feasibility.
+"""

@@ -242,9 +242,14 @@ def _mass_matrix(params: FprParameters, parsed: ParsedConfiguration,
     inertia_c[1, 1] += trace
     inertia_c[2, 2] += trace
     hx, hy, hz = (c.static_first_moment + first[1:].sum(axis=0)).tolist()
-    M = np.empty((6 + n, 6 + n))
+    template = params._cache.get("mass_matrix_template")
+    if template is None:
+        template = np.zeros((6 + n, 6 + n))
+        template[:3, :3] = c.total_mass * np.eye(3)
+        template[6:, 6:] = np.diag(c.leg_inertias[:, 2, 2])  # e_zᵀ I_i e_z, constant
+        params._cache["mass_matrix_template"] = template
+    M = template.copy()
     # Platform block S_pᵀ I_C S_p (2.63) with S_p = [[0, 1], [R_pᵀ, 0]] (2.61).
-    M[:3, :3] = c.total_mass * np.eye(3)
     M_omega_v = np.array([[0.0, -hz, hy], [hz, 0.0, -hx], [-hy, hx, 0.0]]) @ R.T
     M[3:6, :3] = M_omega_v
     M[:3, 3:6] = M_omega_v.T
@@ -255,7 +260,6 @@ def _mass_matrix(params: FprParameters, parsed: ParsedConfiguration,
     M[:3, 6:] = R @ linear.T
     M[3:6, 6:] = (angular + cross(c.anchors, linear)).T
     M[6:, :6] = M[:6, 6:].T
-    M[6:, 6:] = np.diag(c.leg_inertias[:, 2, 2])
     return M
 
 

@@ -125,11 +125,11 @@ def _spatial_inertia(mass, first_moment, inertia) -> np.ndarray:
 
 def model_constants(params: FprParameters) -> ModelConstants:
     """The per-parameter constants, computed on first use and cached on ``params`` (immutable)."""
+    if not isinstance(params, FprParameters):
+        raise ValueError(f"params: expected FprParameters, got {type(params).__name__}")
     cached = params._cache.get("constants")
     if cached is not None:
         return cached
-    if not isinstance(params, FprParameters):
-        raise ValueError(f"params: expected FprParameters, got {type(params).__name__}")
     n = params.n
     alpha = leg_anchor_angles(n)
     ca, sa = np.cos(alpha), np.sin(alpha)
