@@ -17,7 +17,10 @@ setup(
     zip_safe=True,
     maintainer='fpr maintainers',
     maintainer_email='fpr-maintainers@example.org',
-    description='The Flying Parallel Robot as a ROS-free Python library: parameters, rotations and frames, geometry, kinematics, dynamics, wrench feasibility.',
+    description=(
+        'The Flying Parallel Robot as a ROS-free Python library: parameters, rotations '
+        'and frames, geometry, kinematics, dynamics, wrench feasibility.'
+    ),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

@@ -18,7 +18,10 @@ setup(
     zip_safe=True,
     maintainer='fpr maintainers',
     maintainer_email='fpr-maintainers@example.org',
-    description='Simulator node replacing the FPR hardware: plant, PX4 autopilot emulators over MAVLink 2, cameras.',
+    description=(
+        'Simulator node replacing the FPR hardware: plant, PX4 autopilot emulators over '
+        'MAVLink 2, cameras.'
+    ),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

@@ -1,0 +1,398 @@
+"""One UAV's controller: state -> observer -> law -> thrust distribution -> own setpoint (DESIGN.md §4).
+
+Every UAV runs the same computation for the whole robot and applies its own share (thesis §4.3.2):
+
+- ``centralized``: ground truth (motion capture) in F0, PID motion law (4.27)-(4.28) with the Table 4.1
+  "Centralized" gains, desired pose integrated from the teleoperation velocities.
+- ``communicating`` (C): own LocalState + the others' ζ_j, PID (4.27)-(4.29) in F_Fp.
+- ``non_communicating`` (NC): the others' states replaced by desired values (4.32).
+- ``impedance``: impedance law (4.33)-(4.34) with a momentum observer (4.35)-(4.37).
+- ``pd``, ``pd_compensated``: the Table 3.4 comparison laws (PD, PD + feed-forward −τ̂_e).
+
+``state_source = "ground_truth"`` runs impedance / pd / pd_compensated on the ground truth in F0 with the full
+position error (thesis Ch. 3 setting, Table 3.1 gains); ``centralized`` implies it. With ``state_source =
+"local"``, C, impedance, pd and pd_compensated need every peer's ζ: when one is older than ``info_timeout`` the
+controller falls back to NC and reports it, and returns when all are fresh again.
+
+The wrench estimate is expressed in the controller frame (F_Fp or F0) for the force, Fp for the moment.
+No rclpy here; the node converts messages to the dataclasses below.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from fpr_model.dynamics import thrusts_from_wrench
+from fpr_model.geometry import leg_anchor_angles, platform_to_leg_rotation
+from fpr_model.parameters import FprParameters
+from fpr_model.rotations import quat_to_rotmat, rotmat_to_euler_zyx
+
+from fpr_control.information import (
+    InformationTable,
+    LocalEstimate,
+    PeerInfo,
+    flat_platform_quat,
+    reconstruct_state,
+    thrust_vector,
+)
+from fpr_control.laws import (
+    ImpedanceGains,
+    PidGains,
+    PidMotionLaw,
+    compute_model_terms,
+    configuration_error,
+    control_wrench,
+    impedance_acceleration,
+    observer_inputs,
+    pd_acceleration,
+    pid_gains_from_groups,
+    wrench_tracking_error,
+)
+from fpr_control.observers import OBSERVER_KINDS, ObserverGains, make_observer
+from fpr_control.reference import (
+    CentralizedReference,
+    DesiredTrajectory,
+    TeleopReference,
+    decentralized_reference,
+)
+from fpr_control.setpoints import (
+    desired_attitude,
+    hover_thrust_share,
+    local_frame_attitude,
+    saturate_thrust_vector,
+)
+
+MODES = ("centralized", "communicating", "non_communicating", "impedance", "pd", "pd_compensated")
+MODE_CODES = {name: code for code, name in enumerate(MODES)}  # = fpr_msgs/ControllerStatus MODE_*
+STATE_SOURCES = ("local", "ground_truth")
+#: TeleopCommand.MODE_FLY: integrators run and the centralized reference is free only while flying.
+TELEOP_MODE_FLY = 2
+_NEEDS_PEERS = ("communicating", "impedance", "pd", "pd_compensated")
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    """All gains (diagonals of length 6 + n). Defaults: see :func:`default_gains`."""
+
+    impedance_centralized: ImpedanceGains
+    impedance_decentralized: ImpedanceGains
+    pid_centralized: PidGains
+    pid_decentralized: PidGains
+    observer: ObserverGains = field(default_factory=ObserverGains)
+
+
+#: Default gains as (position, orientation, legs) triples or Table 4.1 (kp, kd, ki) rows; the node declares one
+#: ROS parameter per leaf ("gains.<group>.<name>") and config/controller.yaml repeats them.
+DEFAULT_GAINS: dict = {
+    # Table 3.1 (centralized impedance; also the ground-truth pd / pd_compensated modes' observer)
+    "impedance_centralized": {"inertia": [5.0, 8.0, 5.0], "damping": [10.0, 25.0, 20.0],
+                              "stiffness": [25.0, 25.0, 15.0]},
+    # Table 4.5: the position stiffness is meaningless without a position (its error is 0 in (4.29))
+    "impedance_decentralized": {"inertia": [5.0, 8.0, 5.0], "damping": [10.0, 25.0, 20.0],
+                                "stiffness": [0.0, 25.0, 15.0]},
+    # Table 4.1, columns (Kp, Kd, Ki); "*" (not available in the decentralized controller) = 0
+    "pid_centralized": {"position_xy": [9.0, 6.0, 25.0], "position_z": [16.0, 8.0, 50.0],
+                        "orientation_xy": [9.0, 6.0, 1.0], "orientation_z": [9.0, 6.0, 0.5],
+                        "legs": [9.0, 6.0, 10.0], "integral_limit": [2.0, 2.0, 2.0],
+                        "integral_zone": [0.1, 0.02, 0.02]},
+    "pid_decentralized": {"position_xy": [0.0, 9.0, 0.0], "position_z": [0.0, 8.0, 0.0],
+                          "orientation_xy": [9.0, 6.0, 1.0], "orientation_z": [0.0, 6.0, 0.0],
+                          "legs": [9.0, 6.0, 0.5], "integral_limit": [2.0, 2.0, 2.0],
+                          "integral_zone": [0.1, 0.02, 0.02]},
+    # Table 3.1 observer gains (position, orientation, legs); smwo_epsilon: sgn* linear zone (3.21)
+    "observer": {"fowo": [2.0, 1.0, 1.0], "sowo_k1": [4.0, 2.0, 2.0], "sowo_k2": [1.0, 0.5, 0.5],
+                 "smwo_ks": [4.0, 1.0, 1.0], "smwo_kt": [3.2, 1.6, 1.6], "smwo_epsilon": 0.02},
+}
+
+
+def gains_from_dict(d: dict, n: int) -> ControllerGains:
+    """:class:`ControllerGains` from the :data:`DEFAULT_GAINS` layout (missing entries take the defaults)."""
+    merged = {group: {**values, **d.get(group, {})} for group, values in DEFAULT_GAINS.items()}
+
+    def impedance(group: str) -> ImpedanceGains:
+        g = merged[group]
+        return ImpedanceGains.from_groups(g["inertia"], g["damping"], g["stiffness"], n)
+
+    o = merged["observer"]
+    observer = ObserverGains(tuple(o["fowo"]), tuple(o["sowo_k1"]), tuple(o["sowo_k2"]), tuple(o["smwo_ks"]),
+                             tuple(o["smwo_kt"]), float(o["smwo_epsilon"]))
+    return ControllerGains(impedance("impedance_centralized"), impedance("impedance_decentralized"),
+                           pid_gains_from_groups(merged["pid_centralized"], n),
+                           pid_gains_from_groups(merged["pid_decentralized"], n), observer)
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    uav_id: int
+    mode: str
+    gains: ControllerGains
+    observer: str = "fowo"
+    state_source: str = "local"
+    period: float = 0.02  # [s] control period
+    info_timeout: float = 0.2  # [s]
+    max_thrust: float = 25.0  # f_max [N]
+    max_tilt: float = math.radians(35.0)  # [rad] from the vertical of the controller frame
+    require_own_echo: bool = True  # the own ζ_i must come back on the shared topic (else fallback)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        if self.observer not in OBSERVER_KINDS:
+            raise ValueError(f"observer must be one of {OBSERVER_KINDS}, got {self.observer!r}")
+        if self.state_source not in STATE_SOURCES:
+            raise ValueError(f"state_source must be one of {STATE_SOURCES}, got {self.state_source!r}")
+        if not (self.period > 0.0 and self.info_timeout > 0.0 and self.max_thrust > 0.0
+                and 0.0 < self.max_tilt < 0.5 * math.pi):
+            raise ValueError("period, info_timeout, max_thrust must be > 0 and max_tilt in (0, pi/2)")
+
+
+@dataclass
+class GroundTruth:
+    """Ground truth (fpr_msgs/FprState) in F0: platform pose, ν parts, UAV attitudes."""
+
+    platform_position: np.ndarray
+    platform_quat: np.ndarray  # [w, x, y, z]
+    platform_velocity: np.ndarray  # F0
+    platform_rate: np.ndarray  # Fp
+    leg_angles: np.ndarray
+    leg_rates: np.ndarray
+    uav_quats: np.ndarray  # (n, 4) [w, x, y, z], body FLU -> F0
+
+    def is_finite(self) -> bool:
+        return bool(all(np.all(np.isfinite(a)) for a in (
+            self.platform_position, self.platform_quat, self.platform_velocity, self.platform_rate,
+            self.leg_angles, self.leg_rates, self.uav_quats))) and float(np.linalg.norm(self.platform_quat)) > 0.5
+
+
+@dataclass
+class ControlOutput:
+    """One control step's results."""
+
+    attitude: np.ndarray  # 0i q^d_i [w, x, y, z] in the UAV's own local frame
+    thrust: float  # f^d_t,i [N], in [0, f_max]
+    thrust_vectors: np.ndarray | None  # (n, 3) full f of the law in the controller frame, before saturation
+    info: PeerInfo | None  # own ζ_i (None without a valid own estimate)
+    wrench: np.ndarray  # τ̂_e (6+n) [controller-frame force, Fp moment, leg moments]
+    contact_force: float  # −(R_pᵀ f̂_p,e)_z [N]
+    active_mode: str
+    fallback_active: bool
+    info_ages: np.ndarray
+    thrust_saturated: bool
+    tilt_saturated: bool
+    local_state_valid: bool
+    state_ok: bool  # False: no usable state, the setpoint is a hold / hover fallback
+    warning: str | None = None
+    loop_time: float = 0.0
+
+
+class Controller:
+    """Decentralized (or centralized) FPR controller of UAV ``config.uav_id``; call :meth:`step` every period."""
+
+    def __init__(self, params: FprParameters, config: ControllerConfig) -> None:
+        self.params = params
+        self.config = config
+        n = params.n
+        self.n = n
+        self.information = InformationTable(n, config.uav_id, config.info_timeout, config.require_own_echo)
+        self.observer = make_observer(config.observer, config.gains.observer, n)
+        use_truth = config.mode == "centralized" or config.state_source == "ground_truth"
+        self.uses_ground_truth = use_truth
+        self.pid = PidMotionLaw(config.gains.pid_centralized if use_truth else config.gains.pid_decentralized)
+        self.impedance_gains = (config.gains.impedance_centralized if use_truth
+                                else config.gains.impedance_decentralized)
+        self.reference = CentralizedReference()
+        self._alphas = leg_anchor_angles(n)
+        self._last_local: LocalEstimate | None = None
+        self._last_thrusts: np.ndarray | None = None  # (n, 3) applied thrust vectors, controller frame
+        self._last_own_thrust = hover_thrust_share(params.total_mass, params.gravity, n)
+        self._last_output: ControlOutput | None = None
+        self._hold_command: TeleopReference | None = None
+        self._previous_active = config.mode
+        self._observer_paused = False
+
+    # ------------------------------------------------------------------------------------------------
+    def receive_info(self, info: PeerInfo, now: float) -> str | None:
+        """Store a peer's ζ_j (returns a rejection reason or None)."""
+        return self.information.update(info, now)
+
+    def _active_mode(self, now: float) -> tuple[str, bool]:
+        mode = self.config.mode
+        if self.uses_ground_truth or mode not in _NEEDS_PEERS:
+            return mode, False
+        if self.information.all_fresh(now):
+            return mode, False
+        return "non_communicating", True
+
+    # ------------------------------------------------------------------------------------------------
+    def step(self, now: float, local: LocalEstimate | None, command: TeleopReference | None,
+             ground_truth: GroundTruth | None = None, uav_yaw_local: float | None = None) -> ControlOutput:
+        """One control period at time ``now`` [s]. ``uav_yaw_local`` = own IMU yaw in F0i [rad] (defaults to
+        ``local.uav_yaw``; in ground-truth mode without either, F0i is taken as F0)."""
+        start = time.perf_counter()
+        warning = None
+        local_valid = local is not None and local.is_finite()
+        if local is not None and not local_valid:
+            warning = "own local state is not finite: using the last valid one"
+        if local_valid:
+            self._last_local = local
+        local = self._last_local
+        local_ok = local is not None and local_valid and local.valid
+        if command is not None and not command.is_finite():
+            warning = "teleoperation command is not finite: holding"
+            command = None
+        active, fallback = self._active_mode(now)
+        ages = self.information.ages(now)
+        try:
+            out = self._compute(now, local, command, ground_truth, uav_yaw_local, active, fallback, ages, local_ok)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:  # includes SingularConfiguration
+            out = self._safe_output(local, active, fallback, ages, local_ok, uav_yaw_local)
+            warning = f"control step failed ({error}): holding the last setpoint"
+        if out.warning is None:
+            out.warning = warning
+        out.loop_time = time.perf_counter() - start
+        if out.state_ok:
+            self._last_output = out
+        return out
+
+    # ------------------------------------------------------------------------------------------------
+    def _command(self, command: TeleopReference | None, roll: float, pitch: float,
+                 leg_angles: np.ndarray) -> TeleopReference:
+        if command is not None:
+            self._hold_command = None
+            return command
+        if self._hold_command is None:
+            self._hold_command = TeleopReference.hold(roll, pitch, leg_angles)
+        return self._hold_command
+
+    def _compute(self, now, local, command, ground_truth, uav_yaw_local, active, fallback, ages, local_ok):
+        cfg, n, own = self.config, self.n, self.config.uav_id - 1
+        flying = command is not None and command.mode == TELEOP_MODE_FLY
+        if self.uses_ground_truth:
+            if ground_truth is None or not ground_truth.is_finite():
+                return self._safe_output(local, active, fallback, ages, local_ok, uav_yaw_local,
+                                         "no valid ground truth")
+            gt = ground_truth
+            quat = gt.platform_quat / np.linalg.norm(gt.platform_quat)
+            q = np.concatenate([gt.platform_position, quat, gt.leg_angles])
+            nu = np.concatenate([gt.platform_velocity, gt.platform_rate, gt.leg_rates])
+            rotation = quat_to_rotmat(quat)
+            roll, pitch, yaw = rotmat_to_euler_zyx(rotation)
+            cmd = self._command(command, roll, pitch, gt.leg_angles.copy())
+            if not flying or not self.reference.initialized:
+                self.reference.reset(gt.platform_position, yaw)
+            desired = self.reference.step(cmd, cfg.period, roll, pitch, rotation)
+            uav_yaw_frame = rotmat_to_euler_zyx(quat_to_rotmat(gt.uav_quats[own]))[2]
+            if uav_yaw_local is None:
+                uav_yaw_local = local.uav_yaw if local is not None else uav_yaw_frame
+            applied = self._last_thrusts
+            use_position = True
+        else:
+            if local is None:
+                return self._safe_output(local, active, fallback, ages, local_ok, uav_yaw_local,
+                                         "no valid local state yet")
+            roll, pitch = local.platform_roll, local.platform_pitch
+            cmd = self._command(command, roll, pitch, np.full(n, local.leg_angle))
+            rotation = quat_to_rotmat(flat_platform_quat(roll, pitch))
+            desired = decentralized_reference(cmd, roll, pitch, rotation)
+            peers = None
+            if active != "non_communicating":
+                peers = {j: self.information.get(j) for j in range(1, n + 1) if j != cfg.uav_id}
+            state = reconstruct_state(self.params, cfg.uav_id, local, peers, desired.q[7:], desired.nu)
+            q, nu = state.q, state.nu
+            uav_yaw_frame = local.relative_yaw
+            if uav_yaw_local is None:
+                uav_yaw_local = local.uav_yaw
+            applied = None
+            if peers is not None:
+                applied = np.empty((n, 3))
+                for j in range(1, n + 1):
+                    if j == cfg.uav_id:
+                        applied[j - 1] = thrust_vector(local.attitude, self._last_own_thrust)
+                    else:
+                        applied[j - 1] = thrust_vector(peers[j].attitude, peers[j].thrust)
+            use_position = False
+
+        terms = compute_model_terms(self.params, q, nu)
+        # ---- observer (3.8)-(3.24) / (4.35)-(4.37): paused while the others' thrusts are unknown (NC)
+        if applied is None and not self.uses_ground_truth:
+            self._observer_paused = True
+        else:
+            if self._observer_paused:
+                self.observer.reset()
+                self._observer_paused = False
+            # before the first command (centralized): the thrusts that hold gravity, [Jᵀ]† g
+            thrusts = applied if applied is not None else thrusts_from_wrench(self.params, q, terms.gravity)
+            momentum, beta = observer_inputs(terms, nu, thrusts.reshape(-1))
+            self.observer.update(momentum, beta, cfg.period)
+        tau_hat = self.observer.estimate
+
+        # ---- law
+        if active != self._previous_active and active == "non_communicating":
+            self.pid.reset()
+        self._previous_active = active
+        if not flying:
+            self.pid.reset()
+        error = configuration_error(q, desired.q, use_position)
+        tau = self._law(active, terms, error, nu, desired, tau_hat, flying)
+        thrusts_full = thrusts_from_wrench(self.params, q, tau)
+        if not np.all(np.isfinite(thrusts_full)):
+            raise ArithmeticError("non-finite thrusts")
+
+        # ---- saturation and own setpoint (3.36)-(3.38), (4.38)
+        saturated = [saturate_thrust_vector(f, cfg.max_thrust, cfg.max_tilt) for f in thrusts_full]
+        if self.uses_ground_truth:
+            self._last_thrusts = np.array([s.vector for s in saturated])
+        mine = saturated[own]
+        alpha = self._alphas[own]
+        leg_rotation = platform_to_leg_rotation(alpha, q[7 + own])
+        leg_direction = rotation @ leg_rotation[:, 0]
+        radial = rotation @ np.array([math.cos(alpha), math.sin(alpha), 0.0])
+        attitude_frame = desired_attitude(mine.vector, leg_direction, self.params.joint_offset_angle, radial)
+        attitude = local_frame_attitude(attitude_frame, uav_yaw_frame, uav_yaw_local)
+        thrust = float(np.linalg.norm(mine.vector))
+        self._last_own_thrust = thrust
+
+        info = None
+        if local is not None:
+            info = PeerInfo(cfg.uav_id, local.leg_angle, local.velocity.copy(), local.attitude.copy(), thrust)
+        force_platform = rotation.T @ tau_hat[:3]
+        return ControlOutput(
+            attitude=attitude, thrust=thrust, thrust_vectors=thrusts_full, info=info, wrench=tau_hat.copy(),
+            contact_force=float(-force_platform[2]), active_mode=active, fallback_active=fallback,
+            info_ages=ages, thrust_saturated=mine.thrust_saturated, tilt_saturated=mine.tilt_saturated,
+            local_state_valid=local_ok, state_ok=True,
+        )
+
+    def _law(self, active: str, terms, error, nu, desired: DesiredTrajectory, tau_hat, flying) -> np.ndarray:
+        if active == "impedance":
+            u = impedance_acceleration(self.impedance_gains, error, nu, desired.nu, desired.nu_dot,
+                                       wrench_tracking_error(tau_hat, desired.wrench))
+            return control_wrench(terms, u, nu, tau_hat)  # (3.31) / (4.33)
+        if active in ("pd", "pd_compensated"):
+            u = pd_acceleration(self.pid.gains, error, nu, desired.nu, desired.nu_dot)
+            return control_wrench(terms, u, nu, tau_hat if active == "pd_compensated" else None)
+        u = self.pid.acceleration(error, nu, desired.nu, desired.nu_dot, self.config.period, integrate=flying)
+        return control_wrench(terms, u, nu)  # (4.27)
+
+    def _safe_output(self, local, active, fallback, ages, local_ok, uav_yaw_local, warning=None) -> ControlOutput:
+        """Hold the last good setpoint, or level attitude with the hover share of the weight."""
+        last = self._last_output
+        if last is not None:
+            attitude, thrust = last.attitude.copy(), last.thrust
+        else:
+            yaw = uav_yaw_local if uav_yaw_local is not None else (local.uav_yaw if local is not None else 0.0)
+            attitude = np.array([math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw)])
+            thrust = min(hover_thrust_share(self.params.total_mass, self.params.gravity, self.n),
+                         self.config.max_thrust)
+        info = None
+        if local is not None:
+            info = PeerInfo(self.config.uav_id, local.leg_angle, local.velocity.copy(), local.attitude.copy(), thrust)
+        return ControlOutput(
+            attitude=attitude, thrust=float(thrust), thrust_vectors=None, info=info,
+            wrench=self.observer.estimate.copy(), contact_force=0.0, active_mode=active, fallback_active=fallback,
+            info_ages=ages, thrust_saturated=False, tilt_saturated=False, local_state_valid=local_ok,
+            state_ok=False, warning=warning,
+        )

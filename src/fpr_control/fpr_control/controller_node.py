@@ -1,0 +1,246 @@
+"""controller node (one per UAV, namespace /fpr/uav<i>): LocalState + ζ_j + teleop -> setpoint, ζ_i, wrench,
+diagnostics at 50 Hz (DESIGN.md §3-§4). The computation is :class:`fpr_control.controller.Controller`.
+
+    ros2 run fpr_control controller --ros-args -r __ns:=/fpr/uav1 -p uav_id:=1 -p mode:=communicating \
+        --params-file install/fpr_control/share/fpr_control/config/controller.yaml
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rclpy
+from fpr_model.parameters import default_parameters, load_parameters
+from fpr_model.rotations import quat_to_euler_zyx
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import Imu
+
+from fpr_control.controller import (
+    DEFAULT_GAINS,
+    MODE_CODES,
+    Controller,
+    ControllerConfig,
+    GroundTruth,
+    gains_from_dict,
+)
+from fpr_control.information import LocalEstimate, PeerInfo
+from fpr_control.node_utils import RateLimitedLog, describe
+from fpr_control.reference import TeleopReference
+from fpr_msgs.msg import (
+    AttitudeThrustSetpoint,
+    ControllerStatus,
+    FprState,
+    InformationVector,
+    LocalState,
+    TeleopCommand,
+    WrenchEstimate,
+)
+
+
+def _quat_wxyz(q) -> np.ndarray:
+    return np.array([q.w, q.x, q.y, q.z], dtype=float)
+
+
+def _vec(v) -> np.ndarray:
+    return np.array([v.x, v.y, v.z], dtype=float)
+
+
+class ControllerNode(Node):
+    def __init__(self, **node_kwargs) -> None:
+        super().__init__("controller", **node_kwargs)
+        d = self.declare_parameter
+        uav_id = d("uav_id", 1, describe("this UAV's id i (1-based)")).value
+        n = d("n", 3, describe("number of UAVs / legs")).value
+        mode = d("mode", "communicating", describe(
+            "centralized | communicating | non_communicating | impedance | pd | pd_compensated")).value
+        observer = d("observer", "fowo", describe("wrench observer: fowo | sowo | smwo")).value
+        state_source = d("state_source", "local", describe(
+            "local (LocalState + peers' zeta) or ground_truth (/fpr/ground_truth, F0; implied by centralized)")).value
+        rate = d("rate", 50.0, describe("control rate [Hz]")).value
+        info_timeout = d("info_timeout", 0.2, describe("[s] a peer's zeta older than this -> fallback to NC")).value
+        max_thrust = d("max_thrust", 25.0, describe("f_max [N]: thrust saturation")).value
+        max_tilt_deg = d("max_tilt_deg", 35.0, describe("[deg] tilt limit of the thrust direction")).value
+        self.local_timeout = d("local_state_timeout", 0.5, describe("[s] LocalState older -> invalid")).value
+        self.imu_timeout = d("imu_timeout", 0.5, describe("[s] IMU older -> yaw from LocalState.uav_yaw")).value
+        self.teleop_timeout = d("teleop_timeout", 1.0, describe(
+            "[s] no TeleopCommand for this long -> zero velocities, hold the rest")).value
+        model_file = d("model_file", "", describe("FprParameters YAML (empty: thesis Table B.1 defaults)")).value
+        gains = {}
+        for group, values in DEFAULT_GAINS.items():
+            gains[group] = {}
+            for name, default in values.items():
+                value = d(f"gains.{group}.{name}", default, describe(f"{group} gain {name}")).value
+                gains[group][name] = list(value) if isinstance(value, (list, tuple)) else value
+
+        params = load_parameters(model_file) if model_file else default_parameters(int(n))
+        if params.n != n:
+            raise ValueError(f"model_file has n = {params.n}, parameter n = {n}")
+        self.config = ControllerConfig(
+            uav_id=int(uav_id), mode=mode, gains=gains_from_dict(gains, int(n)), observer=observer,
+            state_source=state_source, period=1.0 / rate, info_timeout=info_timeout, max_thrust=max_thrust,
+            max_tilt=math.radians(max_tilt_deg))
+        self.controller = Controller(params, self.config)
+        self.n = int(n)
+        self.log = RateLimitedLog(self.get_logger())
+
+        best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(LocalState, "local_state", self._on_local, best_effort)
+        self.create_subscription(InformationVector, "/fpr/info", self._on_info, QoSProfile(
+            depth=20, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.create_subscription(TeleopCommand, "/fpr/teleop", self._on_teleop, best_effort)
+        self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)
+        if self.controller.uses_ground_truth:
+            self.create_subscription(FprState, "/fpr/ground_truth", self._on_ground_truth, best_effort)
+        self.setpoint_pub = self.create_publisher(AttitudeThrustSetpoint, "setpoint", best_effort)
+        self.info_pub = self.create_publisher(InformationVector, "/fpr/info", best_effort)
+        self.wrench_pub = self.create_publisher(WrenchEstimate, "wrench", best_effort)
+        self.status_pub = self.create_publisher(ControllerStatus, "diagnostics", 10)
+
+        self._local: LocalEstimate | None = None
+        self._local_time = -math.inf
+        self._teleop: TeleopReference | None = None
+        self._teleop_time = -math.inf
+        self._imu_yaw: float | None = None
+        self._imu_time = -math.inf
+        self._ground_truth: GroundTruth | None = None
+        self.create_timer(self.config.period, self._on_tick)
+        self.get_logger().info(
+            f"controller uav {uav_id}/{n}: mode {mode}, observer {observer}, state {state_source}, "
+            f"{rate:.0f} Hz, info_timeout {info_timeout} s, f_max {max_thrust} N, tilt {max_tilt_deg} deg")
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ---- callbacks: message -> core dataclasses -----------------------------------------------------
+    def _on_local(self, msg: LocalState) -> None:
+        if msg.uav_id not in (0, self.config.uav_id):
+            self.log.warn("local_id", f"LocalState from uav {msg.uav_id} ignored (I am {self.config.uav_id})")
+            return
+        local = LocalEstimate(
+            leg_angle=msg.leg_angle, platform_roll=msg.platform_roll, platform_pitch=msg.platform_pitch,
+            attitude=_quat_wxyz(msg.uav_attitude_flat), velocity=_vec(msg.uav_velocity_flat),
+            relative_yaw=msg.relative_yaw, uav_yaw=msg.uav_yaw, valid=bool(msg.valid))
+        if not local.is_finite():
+            self.log.warn("local_nan", "LocalState contains NaN/inf or a zero quaternion: ignored")
+            return
+        self._local, self._local_time = local, self._now()
+
+    def _on_info(self, msg: InformationVector) -> None:
+        if not msg.valid:
+            return  # the sender says its estimate is stale: treated as missing (its age grows)
+        info = PeerInfo(int(msg.uav_id), msg.leg_angle, _vec(msg.velocity), _quat_wxyz(msg.attitude), msg.thrust)
+        reason = self.controller.receive_info(info, self._now())
+        if reason is not None:
+            self.log.warn(f"info_{msg.uav_id}", f"/fpr/info rejected: {reason}")
+
+    def _on_teleop(self, msg: TeleopCommand) -> None:
+        if len(msg.leg_angles) != self.n or len(msg.leg_rates) != self.n:
+            self.log.warn("teleop_n", f"TeleopCommand with {len(msg.leg_angles)} leg angles (n = {self.n}): ignored")
+            return
+        command = TeleopReference(
+            _vec(msg.platform_velocity), _vec(msg.platform_acceleration), msg.yaw_rate, msg.yaw_acceleration,
+            msg.roll, msg.roll_rate, msg.pitch, msg.pitch_rate, np.array(msg.leg_angles, dtype=float),
+            np.array(msg.leg_rates, dtype=float), msg.contact_force, int(msg.mode))
+        if not command.is_finite():
+            self.log.warn("teleop_nan", "TeleopCommand contains NaN/inf: ignored (holding the last one)")
+            return
+        self._teleop, self._teleop_time = command, self._now()
+
+    def _on_imu(self, msg: Imu) -> None:
+        quat = _quat_wxyz(msg.orientation)
+        norm = float(np.linalg.norm(quat))
+        if not np.all(np.isfinite(quat)) or not 0.5 < norm < 1.5:
+            self.log.warn("imu", "Imu orientation is not a finite unit quaternion: ignored")
+            return
+        self._imu_yaw, self._imu_time = quat_to_euler_zyx(quat / norm)[2], self._now()
+
+    def _on_ground_truth(self, msg: FprState) -> None:
+        n = self.n
+        if len(msg.leg_angles) != n or len(msg.leg_rates) != n or len(msg.uav_poses) != n:
+            self.log.warn("gt_n", "FprState arrays do not have n entries: ignored")
+            return
+        gt = GroundTruth(
+            _vec(msg.platform_pose.position), _quat_wxyz(msg.platform_pose.orientation),
+            _vec(msg.platform_twist.linear), _vec(msg.platform_twist.angular),
+            np.array(msg.leg_angles, dtype=float), np.array(msg.leg_rates, dtype=float),
+            np.array([_quat_wxyz(p.orientation) for p in msg.uav_poses]))
+        if not gt.is_finite():
+            self.log.warn("gt_nan", "FprState contains NaN/inf: ignored")
+            return
+        self._ground_truth = gt
+
+    # ---- control tick ----------------------------------------------------------------------------------
+    def _on_tick(self) -> None:
+        now = self._now()
+        local = self._local if now - self._local_time <= self.local_timeout else None
+        if local is None and not self.controller.uses_ground_truth:
+            self.log.warn("local_stale", "no fresh LocalState: holding")
+        command = self._teleop
+        if command is not None and now - self._teleop_time > self.teleop_timeout:
+            command = command.stopped()
+            self.log.warn("teleop_stale", "no TeleopCommand: zero velocities, holding the configuration")
+        imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
+        out = self.controller.step(now, local, command, self._ground_truth, imu_yaw)
+        if out.warning:
+            self.log.warn("step", out.warning)
+        stamp = self.get_clock().now().to_msg()
+        uav_id = self.config.uav_id
+
+        sp = AttitudeThrustSetpoint()
+        sp.header.stamp, sp.header.frame_id, sp.uav_id = stamp, f"uav{uav_id}/local_enu", uav_id
+        w, x, y, z = (float(v) for v in out.attitude)
+        sp.attitude.w, sp.attitude.x, sp.attitude.y, sp.attitude.z = w, x, y, z
+        sp.thrust = float(out.thrust)
+        self.setpoint_pub.publish(sp)
+
+        if out.info is not None:
+            info = InformationVector()
+            info.header.stamp, info.header.frame_id, info.uav_id = stamp, "flat_platform", uav_id
+            info.leg_angle = float(out.info.leg_angle)
+            info.velocity.x, info.velocity.y, info.velocity.z = (float(v) for v in out.info.velocity)
+            aw, ax, ay, az = (float(v) for v in out.info.attitude)
+            info.attitude.w, info.attitude.x, info.attitude.y, info.attitude.z = aw, ax, ay, az
+            info.thrust = float(out.info.thrust)
+            info.valid = bool(out.local_state_valid or self.controller.uses_ground_truth)
+            self.info_pub.publish(info)
+
+        wr = WrenchEstimate()
+        wr.header.stamp, wr.header.frame_id = stamp, "world" if self.controller.uses_ground_truth else "flat_platform"
+        wr.uav_id, wr.observer = uav_id, self.config.observer
+        wr.platform_force.x, wr.platform_force.y, wr.platform_force.z = (float(v) for v in out.wrench[:3])
+        wr.platform_moment.x, wr.platform_moment.y, wr.platform_moment.z = (float(v) for v in out.wrench[3:6])
+        wr.leg_moments = [float(v) for v in out.wrench[6:]]
+        wr.contact_force = float(out.contact_force)
+        self.wrench_pub.publish(wr)
+
+        st = ControllerStatus()
+        st.header.stamp, st.uav_id = stamp, uav_id
+        st.configured_mode, st.active_mode = MODE_CODES[self.config.mode], MODE_CODES[out.active_mode]
+        st.fallback_active = bool(out.fallback_active)
+        st.info_ages = [float(a) for a in out.info_ages]  # inf: never received
+        st.thrust_saturated, st.tilt_saturated = bool(out.thrust_saturated), bool(out.tilt_saturated)
+        st.local_state_valid = bool(out.local_state_valid)
+        st.loop_time = float(out.loop_time)
+        self.status_pub.publish(st)
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ControllerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,147 @@
+"""High-level control laws of the FPR: impedance (3.25)-(3.31) / (4.33)-(4.34), PID motion law (4.27)-(4.29),
+PD and PD+C (Table 3.4), and the model terms they need. The thrust distribution ``f = [Jᵀ]† τ`` (3.32) / (4.33) is
+:func:`fpr_model.dynamics.thrusts_from_wrench`.
+
+All vectors follow fpr_model: ``q = [p_p (3), q_p (4, [w,x,y,z]), θ (n)]``, ``ν = [v_p (controller world frame,
+m/s), ω_p (Fp, rad/s), θ̇ (rad/s)]``, wrenches ``[f_p (world, N), m_p (Fp, N·m), m_l (N·m)]``. The controller
+"world" frame is F0 for the centralized variants and the flat platform frame F_Fp for the decentralized ones
+(thesis §4.3.1). Gains are diagonals given as vectors of length 6 + n. No rclpy here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from fpr_model.dynamics import coriolis_matrix, gravity, mass_matrix
+from fpr_model.kinematics import jacobian
+from fpr_model.parameters import FprParameters
+from fpr_model.rotations import attitude_error_vector
+
+from fpr_control.observers import expand_gains
+
+
+@dataclass(frozen=True)
+class ModelTerms:
+    """Model quantities at (q, ν): M (6+n)², C (6+n)², g (6+n), J (3n)×(6+n) (thesis (2.20), (2.25))."""
+
+    mass: np.ndarray
+    coriolis: np.ndarray
+    gravity: np.ndarray
+    jacobian: np.ndarray
+
+
+def compute_model_terms(params: FprParameters, q: np.ndarray, nu: np.ndarray) -> ModelTerms:
+    """M(q), C(q, ν), g(q) (2.25) and J(q) (2.20) from fpr_model, in the frame of q and ν."""
+    return ModelTerms(mass_matrix(params, q), coriolis_matrix(params, q, nu), gravity(params, q), jacobian(params, q))
+
+
+def observer_inputs(terms: ModelTerms, nu: np.ndarray, thrusts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Momentum ``P = M ν`` and the known momentum rate ``β = Cᵀ ν − g + Jᵀ f`` (3.6), (2.28), for the
+    observers; ``thrusts`` f (3n,) are the thrust vectors applied during the last period [N]."""
+    return terms.mass @ nu, terms.coriolis.T @ nu - terms.gravity + terms.jacobian.T @ thrusts
+
+
+@dataclass(frozen=True)
+class ImpedanceGains:
+    """Desired impedance M^d, B^d, K^d of (3.25) as diagonals (length 6 + n)."""
+
+    inertia: np.ndarray
+    damping: np.ndarray
+    stiffness: np.ndarray
+
+    @staticmethod
+    def from_groups(inertia, damping, stiffness, n: int) -> ImpedanceGains:
+        """From (position, orientation, legs) triples, e.g. Table 3.1: (5, 8, 5), (10, 25, 20), (25, 25, 15)."""
+        return ImpedanceGains(expand_gains(inertia, n), expand_gains(damping, n), expand_gains(stiffness, n))
+
+
+@dataclass(frozen=True)
+class PidGains:
+    """K_p, K_d, K_i of (4.28) as diagonals (length 6 + n) and the anti-windup: the bound on |K_i ∫ε| (same
+    units as u: m/s², rad/s²) and the integration zone (ε_j is integrated only while |ε_j| ≤ zone_j; m, rad)."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    ki: np.ndarray
+    integral_limit: np.ndarray
+    integral_zone: np.ndarray
+
+
+def pid_gains_from_groups(groups: dict, n: int) -> PidGains:
+    """Table 4.1 layout: ``groups[name] = (kp, kd, ki)`` for names position_xy, position_z, orientation_xy,
+    orientation_z, legs, plus ``integral_limit`` and ``integral_zone`` = (position, orientation, legs)."""
+    def vector(column: int) -> np.ndarray:
+        pxy, pz = groups["position_xy"][column], groups["position_z"][column]
+        oxy, oz = groups["orientation_xy"][column], groups["orientation_z"][column]
+        return np.concatenate([[pxy, pxy, pz, oxy, oxy, oz], np.full(n, groups["legs"][column])]).astype(float)
+
+    limit = expand_gains(groups.get("integral_limit", (2.0, 2.0, 2.0)), n)
+    zone = expand_gains(groups.get("integral_zone", (math.inf, math.inf, math.inf)), n)
+    return PidGains(vector(0), vector(1), vector(2), limit, zone)
+
+
+def configuration_error(q: np.ndarray, q_d: np.ndarray, use_position: bool = True) -> np.ndarray:
+    """ε_q(q^d, q) of (3.27): ``[p^d − p; ε_o(q^d_p, q_p); θ^d − θ]`` with ε_o of (3.28)-(3.29) (Fp, about
+    δφ/2 for small errors, spec §0.3). ``use_position=False`` gives (4.29): the position rows are 0."""
+    error = np.empty(q.size - 1)
+    error[:3] = (q_d[:3] - q[:3]) if use_position else 0.0
+    error[3:6] = attitude_error_vector(q[3:7], q_d[3:7])
+    error[6:] = q_d[7:] - q[7:]
+    return error
+
+
+def wrench_tracking_error(tau_hat: np.ndarray, tau_desired: np.ndarray) -> np.ndarray:
+    """ε_τ = −τ̂_e − τ^d_e (3.26): estimated wrench exerted on the environment minus the desired one."""
+    return -np.asarray(tau_hat) - np.asarray(tau_desired)
+
+
+def impedance_acceleration(gains: ImpedanceGains, config_error: np.ndarray, nu: np.ndarray, nu_d: np.ndarray,
+                           nu_dot_d: np.ndarray, wrench_error: np.ndarray) -> np.ndarray:
+    """Auxiliary input u of (3.30) / (4.34): ``ν̇^d + (M^d)^{-1} (B^d (ν^d − ν) + K^d ε_q − ε_τ)``."""
+    return nu_dot_d + (gains.damping * (nu_d - nu) + gains.stiffness * config_error - wrench_error) / gains.inertia
+
+
+def control_wrench(terms: ModelTerms, u: np.ndarray, nu: np.ndarray,
+                     tau_hat: np.ndarray | None = None) -> np.ndarray:
+    """Feedback linearisation ``τ = M u + C ν + g (− τ̂_e)`` of (3.31) / (4.27) / (4.33) [N, N·m]."""
+    tau = terms.mass @ u + terms.coriolis @ nu + terms.gravity
+    if tau_hat is not None:
+        tau = tau - tau_hat
+    return tau
+
+
+@dataclass
+class PidMotionLaw:
+    """PID auxiliary input (4.28) with integral anti-windup (thesis §4.4.1, [Azar 2015]): the integral state is
+    clamped so that ``|K_i ∫ε| ≤ integral_limit`` element-wise, and an element is integrated only while its
+    error is inside ``integral_zone`` (conditional integration: no wind-up during large steps)."""
+
+    gains: PidGains
+    integral: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.integral = np.zeros(len(self.gains.kp))
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+
+    def acceleration(self, config_error: np.ndarray, nu: np.ndarray, nu_d: np.ndarray, nu_dot_d: np.ndarray,
+                     dt: float, integrate: bool = True) -> np.ndarray:
+        """``u = ν̇^d + K_d (ν^d − ν) + K_p ε + K_i ∫ε dt`` (4.28)."""
+        g = self.gains
+        if integrate and dt > 0.0:
+            inside = np.abs(config_error) <= g.integral_zone
+            self.integral += np.where(inside, config_error, 0.0) * dt
+            with np.errstate(divide="ignore"):
+                bound = np.where(g.ki > 0.0, g.integral_limit / np.where(g.ki > 0.0, g.ki, 1.0), 0.0)
+            np.clip(self.integral, -bound, bound, out=self.integral)
+        return nu_dot_d + g.kd * (nu_d - nu) + g.kp * config_error + g.ki * self.integral
+
+
+def pd_acceleration(gains: PidGains, config_error: np.ndarray, nu: np.ndarray, nu_d: np.ndarray,
+                    nu_dot_d: np.ndarray) -> np.ndarray:
+    """PD law of Table 3.4 ([Six 2018]): ``u = ν̇^d + K_d (ν^d − ν) + K_p ε``; used with
+    :func:`control_wrench` without (PD) or with (PD+C, feed-forward −τ̂_e) the wrench estimate."""
+    return nu_dot_d + gains.kd * (nu_d - nu) + gains.kp * config_error

@@ -1,0 +1,92 @@
+"""Quadrotor setpoints from the thrust vectors (thesis §3.3.2 (3.36)-(3.38), §4.3.4 (4.38)).
+
+The controller computes thrust vectors f_i [N] in its world frame F (F0 centralized, F_Fp decentralized).
+For its own UAV it turns f_i into a thrust magnitude and a desired attitude R^d_i (body FLU -> F), with the
+body x axis at the constant angle β from the leg (propeller/leg clearance, (3.37), spec §1.7), then
+re-expresses the yaw in the UAV's own local frame F0i (4.38). Saturations: thrust ≤ f_max, tilt of z^d_i
+from the vertical ≤ max_tilt. No rclpy here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from fpr_model.rotations import (
+    euler_zyx_to_quat,
+    quat_from_axis_angle,
+    quat_to_rotmat,
+    rotmat_to_euler_zyx,
+)
+
+_UP = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class SaturatedThrust:
+    """Thrust vector after the saturations, with flags."""
+
+    vector: np.ndarray  # (3,) in F [N]
+    thrust_saturated: bool
+    tilt_saturated: bool
+
+
+def saturate_thrust_vector(thrust_vector: np.ndarray, max_thrust: float, max_tilt: float) -> SaturatedThrust:
+    """Clip the direction to ``angle(f, +z) ≤ max_tilt`` [rad] (rotating it toward +z in its vertical plane,
+    magnitude kept), then the magnitude to ``[0, max_thrust]`` [N]. A zero or non-finite vector gives 0."""
+    f = np.asarray(thrust_vector, dtype=float)
+    magnitude = float(np.linalg.norm(f))
+    if not math.isfinite(magnitude) or magnitude < 1e-9:
+        return SaturatedThrust(np.zeros(3), False, False)
+    direction = f / magnitude
+    tilt_saturated = False
+    if direction[2] < math.cos(max_tilt):
+        horizontal = direction[:2]
+        h_norm = float(np.linalg.norm(horizontal))
+        azimuth = horizontal / h_norm if h_norm > 1e-12 else np.array([1.0, 0.0])
+        direction = np.array([azimuth[0] * math.sin(max_tilt), azimuth[1] * math.sin(max_tilt), math.cos(max_tilt)])
+        tilt_saturated = True
+    thrust_saturated = magnitude > max_thrust
+    magnitude = min(magnitude, max_thrust)
+    return SaturatedThrust(direction * magnitude, thrust_saturated, tilt_saturated)
+
+
+def desired_attitude(thrust_vector: np.ndarray, leg_direction: np.ndarray, beta: float,
+                     fallback_radial: np.ndarray | None = None) -> np.ndarray:
+    """R^d_i = [x^d, z^d × x^d, z^d] (3.38) with z^d = f_i/‖f_i‖ (3.36) and (3.37):
+    ``x' = l_i × z^d`` (normalised), ``x^d = AxisAngle(z^d, β − π/2) x'``; l_i = unit A_i -> B_i in F.
+    This puts x^d at the signed angle +β about z^d from the horizontal projection of −l_i (spec §1.7).
+
+    If l_i ∥ z^d the rule is undefined; then ``fallback_radial`` (the outward leg anchor direction, or x of F)
+    replaces l_i. A zero thrust vector gives z^d = +z."""
+    f = np.asarray(thrust_vector, dtype=float)
+    norm = float(np.linalg.norm(f))
+    z_axis = f / norm if norm > 1e-9 else _UP.copy()
+    x_prime = np.cross(leg_direction, z_axis)
+    if np.linalg.norm(x_prime) < 1e-6:
+        radial = fallback_radial if fallback_radial is not None else np.array([1.0, 0.0, 0.0])
+        x_prime = np.cross(radial, z_axis)
+        if np.linalg.norm(x_prime) < 1e-6:
+            x_prime = np.cross(np.array([0.0, 1.0, 0.0]), z_axis)
+    x_prime /= np.linalg.norm(x_prime)
+    x_axis = quat_to_rotmat(quat_from_axis_angle(z_axis, beta - 0.5 * math.pi)) @ x_prime
+    x_axis -= z_axis * float(x_axis @ z_axis)  # remove round-off
+    x_axis /= np.linalg.norm(x_axis)
+    return np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])
+
+
+def local_frame_attitude(rotation_in_frame: np.ndarray, uav_yaw_in_frame: float, uav_yaw_local: float) -> np.ndarray:
+    """(4.38): attitude R^d (body -> controller frame F) re-expressed in the UAV's local frame F0i, as a unit
+    quaternion [w, x, y, z]. Roll and pitch are kept; ``ψ^d_0i = ψ_0i + (ψ^d_F − ψ_F)`` with ψ_F the UAV's
+    current yaw in F (pψ_i for F = F_Fp, thesis: pψ_i = Fpψ_i) and ψ_0i its yaw from its own IMU [rad]."""
+    roll, pitch, yaw = rotmat_to_euler_zyx(rotation_in_frame)
+    yaw_local = uav_yaw_local + (yaw - uav_yaw_in_frame)
+    yaw_local = math.atan2(math.sin(yaw_local), math.cos(yaw_local))
+    quat = euler_zyx_to_quat(roll, pitch, yaw_local)
+    return quat / np.linalg.norm(quat)
+
+
+def hover_thrust_share(total_mass: float, gravity: float, n: int) -> float:
+    """Thrust per UAV holding the robot's weight equally, m_tot g / n [N] (safe fallback magnitude)."""
+    return total_mass * gravity / n

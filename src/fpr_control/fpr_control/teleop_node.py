@@ -1,0 +1,132 @@
+"""teleop node (ground station): sensor_msgs/Joy on ``joy`` -> fpr_msgs/TeleopCommand on /fpr/teleop at 50 Hz.
+
+The mapping (Fig. 4.5 layout, dead zones, low-pass, limits) is config/teleop.yaml, read through the
+``mapping_file`` parameter; the core is :class:`fpr_control.teleop_filter.TeleopFilter`.
+
+    ros2 run fpr_control teleop --ros-args -p n:=3
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import rclpy
+import yaml
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Joy
+
+from fpr_control.node_utils import RateLimitedLog, describe
+from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
+from fpr_msgs.msg import TeleopCommand
+
+
+def default_mapping_file() -> str:
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return os.path.join(get_package_share_directory("fpr_control"), "config", "teleop.yaml")
+    except Exception:  # noqa: BLE001 - ament index missing (source tree): use the file next to the package
+        return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "teleop.yaml")
+
+
+class TeleopNode(Node):
+    def __init__(self, **node_kwargs) -> None:
+        super().__init__("teleop", **node_kwargs)
+        d = self.declare_parameter
+        n = int(d("n", 3, describe("number of legs (TeleopCommand.leg_angles length)")).value)
+        self.rate = float(d("rate", 50.0, describe("publishing rate [Hz]")).value)
+        mapping_file = d("mapping_file", "",
+                         describe("gamepad mapping YAML (empty: installed config/teleop.yaml)")).value
+        use_feasibility = bool(d("feasible_leg_range", False, describe(
+            "also clamp the leg angle into fpr_model.feasibility.feasible_leg_angle_range at the commanded roll/pitch"
+        )).value)
+        self.min_force_margin = float(d("min_force_margin", 2.0, describe("[N] feasibility threshold")).value)
+        self.min_moment_margin = float(d("min_moment_margin", 1.0, describe("[N m] feasibility threshold")).value)
+        path = mapping_file or default_mapping_file()
+        with open(path, encoding="utf-8") as stream:
+            config = config_from_dict(yaml.safe_load(stream), n=n)
+        leg_range = None
+        if use_feasibility:
+            from fpr_model.feasibility import feasible_leg_angle_range
+            from fpr_model.parameters import default_parameters
+
+            params = default_parameters(n)
+
+            def leg_range(roll: float, pitch: float) -> tuple[float, float]:
+                result = feasible_leg_angle_range(params, roll, pitch, self.min_force_margin,
+                                                  self.min_moment_margin)
+                if result is None:
+                    raise ValueError("no feasible leg angle at this orientation")
+                return result
+
+        self.filter = TeleopFilter(config, leg_range)
+        self.log = RateLimitedLog(self.get_logger())
+        joy_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(Joy, "joy", self._on_joy, joy_qos)
+        self.pub = self.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+        self._last_tick: float | None = None
+        self._last_mode = self.filter.mode
+        self._was_stale = True
+        self.create_timer(1.0 / self.rate, self._on_tick)
+        self.get_logger().info(f"teleop: mapping {path}, {self.rate:.0f} Hz, n = {n}, "
+                               f"feasible leg range {'on' if use_feasibility else 'off'}")
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_joy(self, msg: Joy) -> None:
+        reason = self.filter.joy(self._now(), list(msg.axes), list(msg.buttons))
+        if reason is not None:
+            self.log.warn("joy", f"Joy ignored: {reason}")
+
+    def _on_tick(self) -> None:
+        now = self._now()
+        dt = 1.0 / self.rate if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.5)
+        self._last_tick = now
+        out = self.filter.step(now, dt)
+        if out.joy_stale and not self._was_stale:
+            self.get_logger().warning("joystick silent: zero velocities, holding roll/pitch/legs/force")
+        self._was_stale = out.joy_stale
+        if out.mode != self._last_mode:
+            self.get_logger().info(f"teleop mode -> {MODE_NAMES[out.mode]}")
+            self._last_mode = out.mode
+        msg = TeleopCommand()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = "flat_platform"
+        msg.mode = out.mode
+        msg.platform_velocity.x, msg.platform_velocity.y, msg.platform_velocity.z = (
+            float(v) for v in out.platform_velocity)
+        msg.platform_acceleration.x, msg.platform_acceleration.y, msg.platform_acceleration.z = (
+            float(v) for v in out.platform_acceleration)
+        msg.yaw_rate, msg.yaw_acceleration = float(out.yaw_rate), float(out.yaw_acceleration)
+        msg.roll, msg.roll_rate = float(out.roll), float(out.roll_rate)
+        msg.pitch, msg.pitch_rate = float(out.pitch), float(out.pitch_rate)
+        msg.leg_angles = [float(v) for v in out.leg_angles]
+        msg.leg_rates = [float(v) for v in out.leg_rates]
+        msg.contact_force = float(out.contact_force)
+        if not all(math.isfinite(v) for v in [msg.roll, msg.pitch, msg.contact_force, *msg.leg_angles]):
+            self.log.warn("nan", "teleop output not finite: not published")
+            return
+        self.pub.publish(msg)
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = TeleopNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

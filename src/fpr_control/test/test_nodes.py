@@ -1,0 +1,206 @@
+"""fpr_control nodes in process with real rclpy and fabricated inputs (run through scripts/run_tests.sh)."""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from fpr_control.controller_node import ControllerNode  # noqa: E402
+from fpr_control.joy_script_node import JoyScriptNode  # noqa: E402
+from fpr_control.joystick_device import JS_EVENT_AXIS, JS_EVENT_BUTTON, pack_event  # noqa: E402
+from fpr_control.joystick_node import JoystickNode  # noqa: E402
+from fpr_control.teleop_node import TeleopNode  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import Joy  # noqa: E402
+
+from fpr_msgs.msg import (  # noqa: E402
+    AttitudeThrustSetpoint,
+    ControllerStatus,
+    InformationVector,
+    LocalState,
+    TeleopCommand,
+    WrenchEstimate,
+)
+
+BEST_EFFORT = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+CONFIG_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
+
+
+def wait_for(predicate, timeout=5.0, step=0.01):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(step)
+    return predicate()
+
+
+class Graph:
+    """One node under test + a helper node, spun by a background executor in a private context."""
+
+    def __init__(self, factory, **kwargs):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = factory(context=self.context, **kwargs)
+        self.helper = rclpy.create_node("fpr_control_test_helper", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.helper)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.helper.destroy_node()
+        rclpy.shutdown(context=self.context)
+        self.thread.join(timeout=2.0)
+
+
+def _local_state(uav_id=1, leg=0.8, nan=False):
+    msg = LocalState()
+    msg.uav_id = uav_id
+    msg.leg_angle = float("nan") if nan else leg
+    msg.relative_pose.orientation.w = 1.0
+    msg.uav_attitude_flat.w = 1.0
+    msg.relative_yaw, msg.uav_yaw, msg.valid = 0.1, 0.5, True
+    return msg
+
+
+def _info(uav_id, leg=0.8):
+    msg = InformationVector()
+    msg.uav_id, msg.leg_angle, msg.thrust, msg.valid = uav_id, leg, 11.0, True
+    msg.attitude.w = 1.0
+    return msg
+
+
+def _teleop(n=3, roll=0.0, nan=False):
+    msg = TeleopCommand()
+    msg.mode = TeleopCommand.MODE_FLY
+    msg.roll = float("nan") if nan else roll
+    msg.leg_angles = [0.8] * n
+    msg.leg_rates = [0.0] * n
+    return msg
+
+
+def test_controller_node_fallback_and_bad_input():
+    graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("uav_id", value=1), Parameter("mode", value="communicating"),
+        Parameter("info_timeout", value=0.2)])
+    try:
+        helper = graph.helper
+        setpoints, statuses, wrenches, infos = [], [], [], []
+        helper.create_subscription(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", setpoints.append, BEST_EFFORT)
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        helper.create_subscription(WrenchEstimate, "/fpr/uav1/wrench", wrenches.append, BEST_EFFORT)
+        helper.create_subscription(InformationVector, "/fpr/info", infos.append, BEST_EFFORT)
+        local_pub = helper.create_publisher(LocalState, "/fpr/uav1/local_state", 10)
+        info_pub = helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT)
+        teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+        assert wait_for(lambda: local_pub.get_subscription_count() > 0 and info_pub.get_subscription_count() > 0
+                        and teleop_pub.get_subscription_count() > 0 and len(statuses) > 0)
+        state = {"peers": (2, 3), "nan_local": False, "nan_teleop": False, "nan_info": False}
+
+        def feed():
+            local_pub.publish(_local_state(nan=state["nan_local"]))
+            teleop_pub.publish(_teleop(nan=state["nan_teleop"]))
+            for j in state["peers"]:
+                info_pub.publish(_info(j, leg=float("nan") if state["nan_info"] else 0.8))
+
+        timer = helper.create_timer(0.02, feed)
+        assert wait_for(lambda: any(s.active_mode == ControllerStatus.MODE_COMMUNICATING
+                                    and not s.fallback_active for s in statuses[-3:]), timeout=8.0)
+        assert any(i.uav_id == 1 and i.valid for i in infos)  # own zeta_1 published
+        assert wrenches and len(wrenches[-1].leg_moments) == 3
+        # silence UAV 3: NC within info_timeout + a period (plus delivery jitter) and reported
+        state["peers"] = (2,)
+        silenced = time.monotonic()
+        assert wait_for(lambda: statuses[-1].fallback_active
+                        and statuses[-1].active_mode == ControllerStatus.MODE_NON_COMMUNICATING, timeout=3.0)
+        assert time.monotonic() - silenced < 0.2 + 0.02 + 0.3
+        assert statuses[-1].info_ages[2] > 0.2 and statuses[-1].configured_mode == ControllerStatus.MODE_COMMUNICATING
+        state["peers"] = (2, 3)
+        assert wait_for(lambda: not statuses[-1].fallback_active
+                        and statuses[-1].active_mode == ControllerStatus.MODE_COMMUNICATING, timeout=3.0)
+        # NaN everywhere: setpoints stay finite, unit, within [0, f_max]
+        count = len(setpoints)
+        state.update(nan_local=True, nan_teleop=True, nan_info=True)
+        assert wait_for(lambda: len(setpoints) > count + 20, timeout=5.0)
+        for sp in setpoints:
+            q = np.array([sp.attitude.x, sp.attitude.y, sp.attitude.z, sp.attitude.w])
+            assert np.all(np.isfinite(q)) and abs(np.linalg.norm(q) - 1.0) < 1e-9
+            assert math.isfinite(sp.thrust) and 0.0 <= sp.thrust <= 25.0 and sp.uav_id == 1
+        assert wait_for(lambda: not statuses[-1].local_state_valid, timeout=2.0)
+        helper.destroy_timer(timer)
+    finally:
+        graph.close()
+
+
+def test_teleop_node_maps_joy_and_ignores_bad_joy():
+    graph = Graph(TeleopNode, parameter_overrides=[Parameter("n", value=3)])
+    try:
+        helper = graph.helper
+        commands = []
+        helper.create_subscription(TeleopCommand, "/fpr/teleop", commands.append, 10)
+        joy_pub = helper.create_publisher(Joy, "/joy", 10)
+        assert wait_for(lambda: joy_pub.get_subscription_count() > 0 and len(commands) > 0)
+        state = {"axes": [0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0], "buttons": [0] * 11}
+
+        def publish():
+            msg = Joy()
+            msg.axes, msg.buttons = [float(a) for a in state["axes"]], state["buttons"]
+            joy_pub.publish(msg)
+
+        timer = helper.create_timer(0.02, publish)
+        assert wait_for(lambda: commands[-1].platform_velocity.x > 0.49, timeout=5.0)  # v_x = 0.5 after the LPF
+        c = commands[-1]
+        assert len(c.leg_angles) == 3 and c.leg_angles[0] == pytest.approx(math.radians(45.0))
+        assert c.mode == TeleopCommand.MODE_IDLE
+        state["axes"] = [float("nan")] * 8  # ignored: the last good sample holds
+        time.sleep(0.2)
+        assert commands[-1].platform_velocity.x > 0.49
+        helper.destroy_timer(timer)  # Joy silent > 0.5 s: velocities to zero
+        assert wait_for(lambda: abs(commands[-1].platform_velocity.x) < 0.01, timeout=5.0)
+    finally:
+        graph.close()
+
+
+def test_joystick_node_reads_a_fifo(tmp_path):
+    path = str(tmp_path / "js0")
+    os.mkfifo(path)
+    graph = Graph(JoystickNode, parameter_overrides=[Parameter("device", value=path),
+                                                     Parameter("min_axes", value=8),
+                                                     Parameter("min_buttons", value=11)])
+    try:
+        joys = []
+        graph.helper.create_subscription(Joy, "/joy", joys.append, 10)
+        with open(path, "wb") as writer:
+            writer.write(pack_event(1, -32767, JS_EVENT_AXIS, 4) + pack_event(2, 1, JS_EVENT_BUTTON, 0))
+            writer.flush()
+            assert wait_for(lambda: joys and joys[-1].axes[4] == pytest.approx(1.0) and joys[-1].buttons[0] == 1,
+                            timeout=5.0)
+        assert len(joys[-1].axes) == 8 and len(joys[-1].buttons) == 11
+    finally:
+        graph.close()
+
+
+def test_joy_script_node_plays_the_timeline(tmp_path):
+    script = tmp_path / "s.yaml"
+    script.write_text("axes_count: 8\nbuttons_count: 11\nkeyframes:\n"
+                      "  - {t: 0.0, axes: {4: 0.25}}\n  - {t: 0.3, buttons: {0: 1}}\n")
+    graph = Graph(JoyScriptNode, parameter_overrides=[Parameter("script", value=str(script))])
+    try:
+        joys = []
+        graph.helper.create_subscription(Joy, "/joy", joys.append, 10)
+        assert wait_for(lambda: joys and joys[-1].buttons[0] == 1, timeout=5.0)
+        assert joys[0].axes[4] == pytest.approx(0.25) and joys[0].buttons[0] == 0
+    finally:
+        graph.close()
