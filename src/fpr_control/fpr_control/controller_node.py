@@ -27,7 +27,7 @@ from fpr_control.controller import (
     gains_from_dict,
 )
 from fpr_control.information import LocalEstimate, PeerInfo
-from fpr_control.node_utils import RateLimitedLog, describe
+from fpr_control.node_utils import LOG_THROTTLE_S, describe
 from fpr_control.reference import TeleopReference
 from fpr_msgs.msg import (
     AttitudeThrustSetpoint,
@@ -84,7 +84,6 @@ class ControllerNode(Node):
             max_tilt=math.radians(max_tilt_deg))
         self.controller = Controller(params, self.config)
         self.n = int(n)
-        self.log = RateLimitedLog(self.get_logger())
 
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(LocalState, "local_state", self._on_local, best_effort)
@@ -117,14 +116,16 @@ class ControllerNode(Node):
     # ---- callbacks: message -> core dataclasses -----------------------------------------------------
     def _on_local(self, msg: LocalState) -> None:
         if msg.uav_id not in (0, self.config.uav_id):
-            self.log.warn("local_id", f"LocalState from uav {msg.uav_id} ignored (I am {self.config.uav_id})")
+            self.get_logger().warning(f"LocalState from uav {msg.uav_id} ignored (I am {self.config.uav_id})",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         local = LocalEstimate(
             leg_angle=msg.leg_angle, platform_roll=msg.platform_roll, platform_pitch=msg.platform_pitch,
             attitude=_quat_wxyz(msg.uav_attitude_flat), velocity=_vec(msg.uav_velocity_flat),
             relative_yaw=msg.relative_yaw, uav_yaw=msg.uav_yaw, valid=bool(msg.valid))
         if not local.is_finite():
-            self.log.warn("local_nan", "LocalState contains NaN/inf or a zero quaternion: ignored")
+            self.get_logger().warning("LocalState contains NaN/inf or a zero quaternion: ignored",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         self._local, self._local_time = local, self._now()
 
@@ -134,18 +135,20 @@ class ControllerNode(Node):
         info = PeerInfo(int(msg.uav_id), msg.leg_angle, _vec(msg.velocity), _quat_wxyz(msg.attitude), msg.thrust)
         reason = self.controller.receive_info(info, self._now())
         if reason is not None:
-            self.log.warn(f"info_{msg.uav_id}", f"/fpr/info rejected: {reason}")
+            self.get_logger().warning(f"/fpr/info rejected: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 
     def _on_teleop(self, msg: TeleopCommand) -> None:
         if len(msg.leg_angles) != self.n or len(msg.leg_rates) != self.n:
-            self.log.warn("teleop_n", f"TeleopCommand with {len(msg.leg_angles)} leg angles (n = {self.n}): ignored")
+            self.get_logger().warning(f"TeleopCommand with {len(msg.leg_angles)} leg angles (n = {self.n}): ignored",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         command = TeleopReference(
             _vec(msg.platform_velocity), _vec(msg.platform_acceleration), msg.yaw_rate, msg.yaw_acceleration,
             msg.roll, msg.roll_rate, msg.pitch, msg.pitch_rate, np.array(msg.leg_angles, dtype=float),
             np.array(msg.leg_rates, dtype=float), msg.contact_force, int(msg.mode))
         if not command.is_finite():
-            self.log.warn("teleop_nan", "TeleopCommand contains NaN/inf: ignored (holding the last one)")
+            self.get_logger().warning("TeleopCommand contains NaN/inf: ignored (holding the last one)",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         self._teleop, self._teleop_time = command, self._now()
 
@@ -153,14 +156,16 @@ class ControllerNode(Node):
         quat = _quat_wxyz(msg.orientation)
         norm = float(np.linalg.norm(quat))
         if not np.all(np.isfinite(quat)) or not 0.5 < norm < 1.5:
-            self.log.warn("imu", "Imu orientation is not a finite unit quaternion: ignored")
+            self.get_logger().warning("Imu orientation is not a finite unit quaternion: ignored",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         self._imu_yaw, self._imu_time = quat_to_euler_zyx(quat / norm)[2], self._now()
 
     def _on_ground_truth(self, msg: FprState) -> None:
         n = self.n
         if len(msg.leg_angles) != n or len(msg.leg_rates) != n or len(msg.uav_poses) != n:
-            self.log.warn("gt_n", "FprState arrays do not have n entries: ignored")
+            self.get_logger().warning("FprState arrays do not have n entries: ignored",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
             return
         gt = GroundTruth(
             _vec(msg.platform_pose.position), _quat_wxyz(msg.platform_pose.orientation),
@@ -168,7 +173,7 @@ class ControllerNode(Node):
             np.array(msg.leg_angles, dtype=float), np.array(msg.leg_rates, dtype=float),
             np.array([_quat_wxyz(p.orientation) for p in msg.uav_poses]))
         if not gt.is_finite():
-            self.log.warn("gt_nan", "FprState contains NaN/inf: ignored")
+            self.get_logger().warning("FprState contains NaN/inf: ignored", throttle_duration_sec=LOG_THROTTLE_S)
             return
         self._ground_truth = gt
 
@@ -177,15 +182,16 @@ class ControllerNode(Node):
         now = self._now()
         local = self._local if now - self._local_time <= self.local_timeout else None
         if local is None and not self.controller.uses_ground_truth:
-            self.log.warn("local_stale", "no fresh LocalState: holding")
+            self.get_logger().warning("no fresh LocalState: holding", throttle_duration_sec=LOG_THROTTLE_S)
         command = self._teleop
         if command is not None and now - self._teleop_time > self.teleop_timeout:
             command = command.stopped()
-            self.log.warn("teleop_stale", "no TeleopCommand: zero velocities, holding the configuration")
+            self.get_logger().warning("no TeleopCommand: zero velocities, holding the configuration",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
         out = self.controller.step(now, local, command, self._ground_truth, imu_yaw)
         if out.warning:
-            self.log.warn("step", out.warning)
+            self.get_logger().warning(out.warning, throttle_duration_sec=LOG_THROTTLE_S)
         stamp = self.get_clock().now().to_msg()
         uav_id = self.config.uav_id
 

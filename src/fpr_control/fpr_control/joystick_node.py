@@ -12,8 +12,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from fpr_control.joystick_device import JoystickDevice
-from fpr_control.node_utils import RateLimitedLog, describe
+from fpr_control.node_utils import describe
 
+DEVICE_LOG_THROTTLE_S = 10.0  # [s] device errors repeat while unplugged: log rarely
 
 class JoystickNode(Node):
     def __init__(self, **node_kwargs) -> None:
@@ -30,7 +31,6 @@ class JoystickNode(Node):
                                  describe("pad Joy.buttons with zeros to at least this length")).value)
         self.reconnect_period = float(d("reconnect_period", 1.0, describe("[s] between open attempts")).value)
         self.device = JoystickDevice(self.device_path, invert_axes=invert)
-        self.log = RateLimitedLog(self.get_logger(), period=10.0)
         self.pub = self.create_publisher(Joy, "joy", 10)
         self._next_open = 0.0
         self._since_publish = 0.0
@@ -50,12 +50,14 @@ class JoystickNode(Node):
                 self.get_logger().info(f"joystick {self.device_path} opened")
             except OSError as error:
                 self._next_open = now + self.reconnect_period
-                self.log.warn("open", f"cannot open {self.device_path}: {error.strerror}; retrying")
+                self.get_logger().warning(f"cannot open {self.device_path}: {error.strerror}; retrying",
+                                          throttle_duration_sec=DEVICE_LOG_THROTTLE_S)
                 return
         try:
             changed = self.device.poll()
         except OSError as error:
-            self.log.warn("read", f"joystick {self.device_path} lost ({error.strerror}); reconnecting")
+            self.get_logger().warning(f"joystick {self.device_path} lost ({error.strerror}); reconnecting",
+                                      throttle_duration_sec=DEVICE_LOG_THROTTLE_S)
             self.device.close()
             self._next_open = now + self.reconnect_period
             return

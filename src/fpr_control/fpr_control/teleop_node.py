@@ -18,7 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy
 
-from fpr_control.node_utils import RateLimitedLog, describe
+from fpr_control.node_utils import LOG_THROTTLE_S, describe
 from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
 from fpr_msgs.msg import TeleopCommand
 
@@ -63,7 +63,6 @@ class TeleopNode(Node):
                 return result
 
         self.filter = TeleopFilter(config, leg_range)
-        self.log = RateLimitedLog(self.get_logger())
         joy_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(Joy, "joy", self._on_joy, joy_qos)
         self.pub = self.create_publisher(TeleopCommand, "/fpr/teleop", 10)
@@ -80,7 +79,7 @@ class TeleopNode(Node):
     def _on_joy(self, msg: Joy) -> None:
         reason = self.filter.joy(self._now(), list(msg.axes), list(msg.buttons))
         if reason is not None:
-            self.log.warn("joy", f"Joy ignored: {reason}")
+            self.get_logger().warning(f"Joy ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 
     def _on_tick(self) -> None:
         now = self._now()
@@ -108,7 +107,7 @@ class TeleopNode(Node):
         msg.leg_rates = [float(v) for v in out.leg_rates]
         msg.contact_force = float(out.contact_force)
         if not all(math.isfinite(v) for v in [msg.roll, msg.pitch, msg.contact_force, *msg.leg_angles]):
-            self.log.warn("nan", "teleop output not finite: not published")
+            self.get_logger().warning("teleop output not finite: not published", throttle_duration_sec=LOG_THROTTLE_S)
             return
         self.pub.publish(msg)
 

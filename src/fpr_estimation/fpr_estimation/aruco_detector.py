@@ -10,8 +10,6 @@ unsupported encoding) is logged (rate-limited) and produces no output.
 
 from __future__ import annotations
 
-import time
-
 import cv2
 import numpy as np
 import rclpy
@@ -65,7 +63,6 @@ class ArucoDetectorNode(Node):
         self._detector = ArucoPoseDetector(self._config)
         self._debug = bool(p["publish_debug_image"])
         self._log_interval = float(p["log_interval"])
-        self._last_log: dict[str, float] = {}
         self._camera: CameraModel | None = None
         self.frames = 0
         self.detections = 0
@@ -75,17 +72,11 @@ class ArucoDetectorNode(Node):
         self.create_subscription(CameraInfo, "camera/camera_info", self._on_camera_info, qos_profile_sensor_data)
         self.create_subscription(Image, "camera/image_raw", self._on_image, qos_profile_sensor_data)
 
-    def _warn(self, key: str, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_log.get(key, -1e9) >= self._log_interval:
-            self._last_log[key] = now
-            self.get_logger().warning(text)
-
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
             camera = CameraModel.from_camera_info(msg.width, msg.height, list(msg.k), list(msg.d))
         except ValueError as error:
-            self._warn("camera_info", f"camera_info refused: {error}")
+            self.get_logger().warning(f"camera_info refused: {error}", throttle_duration_sec=self._log_interval)
             return
         if camera != self._camera:
             self.get_logger().info(f"camera: {camera.width}×{camera.height}, fx={camera.fx:.1f}, fy={camera.fy:.1f}")
@@ -94,13 +85,14 @@ class ArucoDetectorNode(Node):
     def _on_image(self, msg: Image) -> None:
         self.frames += 1
         if self._camera is None:
-            self._warn("no_camera_info", "image received but no camera_info yet: no detection")
+            self.get_logger().warning("image received but no camera_info yet: no detection",
+                                      throttle_duration_sec=self._log_interval)
             return
         try:
             image = decode_image(msg.encoding, msg.width, msg.height, msg.step, msg.data)
             observation = self._detector.detect(image, self._camera)
         except (ValueError, cv2.error) as error:
-            self._warn("bad_image", f"image refused: {error}")
+            self.get_logger().warning(f"image refused: {error}", throttle_duration_sec=self._log_interval)
             return
         if observation is None:
             return

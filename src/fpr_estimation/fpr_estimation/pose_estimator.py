@@ -13,7 +13,6 @@ receive time when a stamp is zero) and corrects on every detection that passes t
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import rclpy
@@ -92,7 +91,6 @@ class PoseEstimatorNode(Node):
         self._frame_id = str(p["frame_id"]) or f"uav{config.uav_id}/platform"
         self._uav_id = config.uav_id
         self._log_interval = float(p["log_interval"])
-        self._last_log: dict[str, float] = {}
         self._was_valid = False
         self.published = 0
         self._pub = self.create_publisher(LocalState, "local_state", 10)
@@ -107,48 +105,45 @@ class PoseEstimatorNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _warn(self, key: str, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_log.get(key, -1e9) >= self._log_interval:
-            self._last_log[key] = now
-            self.get_logger().warning(text)
-
     def _on_imu(self, msg: Imu) -> None:
         stamp = _stamp_seconds(msg.header.stamp) or self._now()
         o, w = msg.orientation, msg.angular_velocity
         problem = self.core.on_imu(stamp, np.array([o.w, o.x, o.y, o.z]), np.array([w.x, w.y, w.z]))
         if problem:
-            self._warn("imu", problem)
+            self.get_logger().warning(problem, throttle_duration_sec=self._log_interval)
 
     def _on_velocity(self, msg: TwistStamped) -> None:
         v = msg.twist.linear
         problem = self.core.on_velocity(np.array([v.x, v.y, v.z]))
         if problem:
-            self._warn("velocity", problem)
+            self.get_logger().warning(problem, throttle_duration_sec=self._log_interval)
 
     def _on_marker(self, msg: MarkerDetection) -> None:
         q, t = msg.pose.orientation, msg.pose.position
         quat = np.array([q.w, q.x, q.y, q.z])
         norm = float(np.linalg.norm(quat)) if np.isfinite(quat).all() else float("nan")
         if not 0.5 < norm < 1.5:
-            self._warn("marker", f"detection with an invalid quaternion (norm {norm}) ignored")
+            self.get_logger().warning(f"detection with an invalid quaternion (norm {norm}) ignored",
+                                      throttle_duration_sec=self._log_interval)
             return
         T = np.eye(4)
         T[:3, :3] = quat_to_rotmat(quat / norm)
         T[:3, 3] = [t.x, t.y, t.z]
         result = self.core.on_detection(self._now(), T)
         if isinstance(result, str):
-            self._warn("marker", result)
+            self.get_logger().warning(result, throttle_duration_sec=self._log_interval)
         elif not result.accepted:
-            self._warn("gate", f"detection rejected by the gate: {100 * result.position_error:.1f} cm, "
-                               f"{math.degrees(result.angle_error):.1f} deg "
-                               f"(total rejected {self.core.rejected_detections})")
+            self.get_logger().warning(f"detection rejected by the gate: {100 * result.position_error:.1f} cm, "
+                                      f"{math.degrees(result.angle_error):.1f} deg "
+                                      f"(total rejected {self.core.rejected_detections})",
+                                      throttle_duration_sec=self._log_interval)
 
     def _on_timer(self) -> None:
         now_msg = self.get_clock().now()
         out = self.core.output(now_msg.nanoseconds * 1e-9)
         if out is None:
-            self._warn("waiting", "no marker detection accepted yet: local_state not published")
+            self.get_logger().warning("no marker detection accepted yet: local_state not published",
+                                      throttle_duration_sec=self._log_interval)
             return
         if self._was_valid and not out.valid:
             self.get_logger().warning(f"estimate stale: no accepted detection for {out.detection_age:.2f} s")
@@ -164,7 +159,8 @@ class PoseEstimatorNode(Node):
         rec = out.reconstruction
         valid = out.valid
         if rec is None:
-            self._warn("no_imu", "no valid IMU attitude yet: reconstruction unavailable, valid = false")
+            self.get_logger().warning("no valid IMU attitude yet: reconstruction unavailable, valid = false",
+                                      throttle_duration_sec=self._log_interval)
             valid = False
             msg.uav_attitude_flat.w = 1.0
         else:

@@ -90,7 +90,8 @@ def test_ambiguity_prefers_the_previous_pose():
     other = max(other, key=lambda R: _rotation_error_deg(R, first.camera_T_marker[:3, :3]))
     detector.previous_rotation = other
     second = detector.detect(frame.image, calibration.camera)
-    assert _rotation_error_deg(second.camera_T_marker[:3, :3], other) < 1e-6
+    # arccos resolves ~1e-6 deg at best (arccos(1 - eps) = 1.2e-6 deg); the two IPPE solutions differ by degrees
+    assert _rotation_error_deg(second.camera_T_marker[:3, :3], other) < 1e-4
     assert second.ambiguity_ratio < 1.0  # reported honestly: the chosen one fits worse
 
 
