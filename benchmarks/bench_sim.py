@@ -45,14 +45,15 @@ def bench_physics(seconds: float = 3.0) -> None:
           f"{1e6 * wall / steps:.1f} us/step, real-time factor {seconds / wall:.2f}x")
     sd = plant.structure
     state = plant.state
-    xi = np.concatenate([state.velocity, state.rate, state.leg_rates])
-    c, s, c2, s2 = sd.leg_trig(state.leg_angles)
-    g = np.array([0.0, 0.0, -9.81])
-    qf = np.zeros(9)
+    xi = np.concatenate([state.velocity, state.rate, state.leg_rates]).tolist()
+    c = np.cos(state.leg_angles).tolist()
+    s = np.sin(state.leg_angles).tolist()
+    g = [0.0, 0.0, -9.81]
+    qf = [0.0] * 9
     reps = 5000
     start = time.perf_counter()
     for _ in range(reps):
-        sd._body_acceleration(c, s, c2, s2, xi, g, qf)
+        sd.accelerate(c, s, xi, g, qf)
     fast = (time.perf_counter() - start) / reps
     nu = state.generalized_velocity()
     reps_ref = 500
@@ -60,8 +61,8 @@ def bench_physics(seconds: float = 3.0) -> None:
     for _ in range(reps_ref):
         forward_dynamics(plant.params, q, nu, qf)
     ref = (time.perf_counter() - start) / reps_ref
-    print(f"structure forward dynamics: fast {1e6 * fast:.1f} us/call vs fpr_model.forward_dynamics "
-          f"{1e6 * ref:.1f} us/call ({ref / fast:.1f}x)")
+    print(f"structure forward dynamics (StructureDynamics.accelerate): {1e6 * fast:.1f} us/call vs "
+          f"fpr_model.forward_dynamics {1e6 * ref:.1f} us/call ({ref / fast:.1f}x)")
     start = time.perf_counter()
     StructureDynamics(plant.params)
     print(f"per-parameter basis fit: {1e3 * (time.perf_counter() - start):.1f} ms once")
@@ -92,7 +93,8 @@ def bench_lockstep(seconds: float = 3.0) -> None:
 
     scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
                                    "ground": {"enabled": False}, "cameras": {"enabled": False}})
-    sim = Simulation(scenario, SimulationOptions(base_port=0, lockstep=True, lockstep_timeout=0.5))
+    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=True,
+                                                 lockstep_timeout=0.5))
     targets = [(e.quat_local.copy(), e.thrust) for e in sim.emulators]
     stop = threading.Event()
 

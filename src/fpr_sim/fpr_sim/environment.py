@@ -47,23 +47,47 @@ class GroundContacts:
         out[:, 2] = normal
         return out
 
-    def update_anchors(self, points: np.ndarray) -> None:
-        """After a step: create anchors on new contacts, slide them when friction saturates, drop them on lift-off."""
+    def point_force(self, anchor: list[float], px: float, py: float, pz: float, vx: float, vy: float,
+                    vz: float) -> tuple[float, float, float]:
+        """:meth:`forces` of ONE point on plain floats (the 1 kHz loop): ``anchor`` [x, y] (NaN: none)."""
         c = self.config
-        touching = (c.height - points[:, 2]) > 0.0
-        for k in range(len(points)):
-            if not touching[k] or not c.enabled:
-                self.anchors[k] = np.nan
+        depth = c.height - pz
+        if not depth > 0.0 or not c.enabled:
+            return 0.0, 0.0, 0.0
+        normal = max(c.stiffness * depth - c.damping * vz, 0.0)
+        ax, ay = anchor
+        if ax != ax:  # NaN: the contact starts here
+            ax, ay = px, py
+        tx = -c.tangential_stiffness * (px - ax) - c.tangential_damping * vx
+        ty = -c.tangential_stiffness * (py - ay) - c.tangential_damping * vy
+        size = math.hypot(tx, ty)
+        limit = c.friction * normal
+        if size > limit:
+            scale = limit / max(size, 1e-12)
+            tx *= scale
+            ty *= scale
+        return tx, ty, normal
+
+    def update_anchors(self, points) -> None:
+        """After a step: create anchors on new contacts, slide them when friction saturates, drop them on lift-off.
+
+        ``points`` (k, 3) [m], array or list of [x, y, z]."""
+        c = self.config
+        anchors = self.anchors
+        for k, (px, py, pz) in enumerate(points.tolist() if isinstance(points, np.ndarray) else points):
+            depth = c.height - pz
+            if not depth > 0.0 or not c.enabled:
+                anchors[k] = np.nan
                 continue
-            if np.isnan(self.anchors[k, 0]):
-                self.anchors[k] = points[k, :2]
+            ax, ay = anchors[k].tolist()
+            if ax != ax:
+                anchors[k] = (px, py)
                 continue
-            depth = c.height - points[k, 2]
             limit = c.friction * c.stiffness * depth / c.tangential_stiffness  # max spring stretch [m]
-            stretch = points[k, :2] - self.anchors[k]
-            size = float(np.hypot(*stretch))
+            sx, sy = px - ax, py - ay
+            size = math.hypot(sx, sy)
             if size > limit:
-                self.anchors[k] = points[k, :2] - stretch * (limit / size)
+                anchors[k] = (px - sx * (limit / size), py - sy * (limit / size))
 
 
 class Environment:
@@ -78,6 +102,8 @@ class Environment:
         self.board_normal = normal / np.linalg.norm(normal)
         self.board_point = np.asarray(self.board.point, dtype=float)
         self.board_end_effector = np.asarray(self.board.end_effector, dtype=float)
+        self._board_normal = tuple(self.board_normal.tolist())
+        self._board_point = tuple(self.board_point.tolist())
         self.wind_constant = np.asarray(scenario.wind.velocity, dtype=float)
         self.has_wind = bool(np.any(self.wind_constant != 0.0) or scenario.wind.gusts)
 
@@ -116,3 +142,21 @@ class Environment:
         speed = float(np.linalg.norm(tangential_velocity))
         friction = -self.board.friction * normal * tangential_velocity / max(speed, 0.01)
         return normal * self.board_normal + friction, normal
+
+    def board_force_scalar(self, point: tuple[float, float, float],
+                           velocity: tuple[float, float, float]) -> tuple[tuple[float, float, float], float]:
+        """:meth:`board_force` on plain floats (the 1 kHz loop): (force (world, N), normal force [N])."""
+        board = self.board
+        if not board.enabled:
+            return (0.0, 0.0, 0.0), 0.0
+        n0, n1, n2 = self._board_normal
+        b0, b1, b2 = self._board_point
+        depth = -((point[0] - b0) * n0 + (point[1] - b1) * n1 + (point[2] - b2) * n2)
+        if depth <= 0.0:
+            return (0.0, 0.0, 0.0), 0.0
+        v0, v1, v2 = velocity
+        normal_speed = v0 * n0 + v1 * n1 + v2 * n2
+        normal = max(0.0, board.stiffness * depth - board.damping * normal_speed)
+        t0, t1, t2 = v0 - normal_speed * n0, v1 - normal_speed * n1, v2 - normal_speed * n2
+        scale = -board.friction * normal / max(math.sqrt(t0 * t0 + t1 * t1 + t2 * t2), 0.01)
+        return (normal * n0 + scale * t0, normal * n1 + scale * t1, normal * n2 + scale * t2), normal

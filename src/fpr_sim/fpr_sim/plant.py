@@ -13,10 +13,13 @@ Block diagram of one step ``dt`` (default 1 ms):
    attitude dynamics (2.92) are then advanced by RK4 with it.
 
 The structure state is integrated in platform-body velocities ξ = [R_pᵀ v_p, ω_p, θ̇]; ν (2.2) is derived.
+The 1 kHz loop runs on plain Python floats (numpy costs ~1 µs per call on 3-vectors); its results are checked
+against frozen trajectories of the former numpy implementation in test/test_plant_oracle.py (to 1e-10).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +27,7 @@ from fpr_model.parameters import FprParameters, default_parameters, parameters_f
 
 from fpr_sim.environment import Environment
 from fpr_sim.quadrotor import AttitudeCommand, QuadrotorFleet
+from fpr_sim.scalar_math import rotation_entries
 from fpr_sim.scenario import Scenario
 from fpr_sim.structure import PointForces, StructureDynamics, StructureState
 
@@ -86,30 +90,62 @@ class Plant:
         self._next_control = 0.0
         self.command = AttitudeCommand(quat=np.tile([1.0, 0, 0, 0], (self.n, 1)), thrust=np.zeros(self.n),
                                        armed=np.zeros(self.n, dtype=bool))
-        self._x = np.zeros(13 + 2 * self.n)
         self._contact_force = 0.0
-        self._external = np.zeros(6 + self.n)
-        self._env_uav_forces = np.zeros((self.n, 3))
-        self._tip_velocity = np.zeros((self.n, 3))
-        self._tip_acceleration = np.zeros((self.n, 3))
+        # constants of the 1 kHz loop as plain floats
+        sd = self.structure
+        self._leg_length = float(sd.leg_length)
+        self._anchors = [tuple(a) for a in sd.anchors.tolist()]
+        self._cos_alpha = sd.cos_alpha.tolist()
+        self._sin_alpha = sd.sin_alpha.tolist()
+        self._joint_axes = [tuple(k) for k in sd.joint_axes.tolist()]
+        self._gravity = tuple(np.asarray(self.params.gravity_vector, dtype=float).tolist())
+        self._joint_offset = tuple(self.joint_offset.tolist())
+        self._uav_masses = self.uav_masses.tolist()
+        wind = scenario.wind
+        self._uav_drag, self._leg_drag, self._platform_drag = wind.uav_drag, wind.leg_drag, wind.platform_drag
+        self._board_enabled = bool(self.environment.board.enabled)
+        self._end_effector = tuple(self.environment.board_end_effector.tolist())
+        self._x_list = [0.0] * (13 + 2 * self.n)
+        self._tips = None  # cached tip kinematics of _x_list
+        self._tip_velocity_list = [(0.0, 0.0, 0.0)] * self.n
+        self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * self.n
         self.reset_to_initial_state()
 
     # ---------------------------------------------------------------------------------------------- state
+    def _set_x(self, x: list[float]) -> None:
+        """The structure state x = [P, q_p, θ, u, ω, θ̇] (plain floats; ``_x`` keeps a numpy copy)."""
+        self._x_list = x
+        self._tips = None
+
+    @property
+    def _x(self) -> np.ndarray:
+        """x as a numpy array (a copy)."""
+        return np.array(self._x_list)
+
+    @property
+    def _tip_velocity(self) -> np.ndarray:
+        return np.array(self._tip_velocity_list)
+
+    @property
+    def _tip_acceleration(self) -> np.ndarray:
+        return np.array(self._tip_acceleration_list)
+
     def set_state(self, state: StructureState) -> None:
         """Place the structure at ``state`` (ν converted to body velocities)."""
         n = self.n
         quat = np.asarray(state.quat, dtype=float)
         quat = quat / np.linalg.norm(quat)
         R = _rotmat(quat)
-        x = self._x
+        x = np.zeros(13 + 2 * n)
         x[0:3] = state.position
         x[3:7] = quat
         x[7:7 + n] = state.leg_angles
         x[7 + n:10 + n] = R.T @ np.asarray(state.velocity, dtype=float)
         x[10 + n:13 + n] = state.rate
         x[13 + n:] = state.leg_rates
-        self._tip_velocity = self._tip_kinematics(x)[1]
-        self._tip_acceleration = np.zeros((n, 3))
+        self._set_x(x.tolist())
+        self._tip_velocity_list = self._tip_kinematics_list(self._x_list)[1]
+        self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * n
         self.environment.ground.anchors[:] = np.nan
 
     @property
@@ -177,91 +213,162 @@ class Plant:
 
     def _tip_kinematics(self, x):
         """Tip positions and velocities (n, 3), world."""
+        positions, velocities = self._tip_kinematics_list(x.tolist() if isinstance(x, np.ndarray) else x)
+        return np.array(positions), np.array(velocities)
+
+    def _tip_kinematics_list(self, x: list[float]) -> tuple[list[tuple], list[tuple]]:
+        """Tip positions B_i and velocities (world) on plain floats: ``p_i = P + R ρ_i``,
+        ``v_i = R (u + ω × ρ_i + l θ̇_i ∂e_i/∂θ_i)`` with ρ_i = a_i + l e_i (thesis (2.5), Fp quantities)."""
         n = self.n
-        (c, s), tips, e = self._tip_geometry(x)
-        R = _rotmat(x[3:7])
-        u, w, rates = x[7 + n:10 + n], x[10 + n:13 + n], x[13 + n:]
-        velocity_body = u + _cross3(w, tips) + (self.structure.leg_length * rates)[:, None] * \
-            self.structure.leg_normals_body(c, s)
-        return x[0:3] + tips @ R.T, velocity_body @ R.T
+        length = self._leg_length
+        px, py, pz = x[0:3]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(*x[3:7])
+        u0, u1, u2, w0, w1, w2 = x[7 + n:13 + n]
+        positions, velocities = [], []
+        for i in range(n):
+            theta = x[7 + i]
+            c = math.cos(theta)
+            s = math.sin(theta)
+            (a0, a1, a2), ca, sa = self._anchors[i], self._cos_alpha[i], self._sin_alpha[i]
+            t0, t1, t2 = a0 + length * ca * c, a1 + length * sa * c, a2 - length * s
+            lr = length * x[13 + n + i]
+            v0 = u0 + w1 * t2 - w2 * t1 - lr * ca * s
+            v1 = u1 + w2 * t0 - w0 * t2 - lr * sa * s
+            v2 = u2 + w0 * t1 - w1 * t0 - lr * c
+            positions.append((px + r00 * t0 + r01 * t1 + r02 * t2, py + r10 * t0 + r11 * t1 + r12 * t2,
+                              pz + r20 * t0 + r21 * t1 + r22 * t2))
+            velocities.append((r00 * v0 + r01 * v1 + r02 * v2, r10 * v0 + r11 * v1 + r12 * v2,
+                               r20 * v0 + r21 * v1 + r22 * v2))
+        return positions, velocities
 
     # ---------------------------------------------------------------------------------------------- dynamics
-    def _derivative(self, x: np.ndarray, thrust_world: np.ndarray, payload: bool) -> np.ndarray:
+    def _derivative(self, x: list[float], thrust: list[tuple]) -> list[float]:
+        """ẋ of the structure state x = [P, q_p, θ, u, ω, θ̇] with the held thrust vectors (world) and the
+        environment forces of this stage, on plain floats. Point forces f (world) at body points ρ (Fp) enter
+        the generalized force in ξ coordinates as ``[Rᵀf, ρ × Rᵀf, k_i · ((ρ − a_i) × Rᵀf)]`` ((2.28)
+        generalised, see StructureDynamics.generalized_forces); thesis (2.86) is solved by
+        StructureDynamics.accelerate."""
         n = self.n
-        sd = self.structure
-        quat = x[3:7]
-        R = _rotmat(quat)
-        theta = x[7:7 + n]
-        c = np.cos(theta)
-        s = np.sin(theta)
-        c2 = c * c - s * s
-        s2 = 2.0 * s * c
-        xi = x[7 + n:]
-        u, w, rates = xi[:3], xi[3:6], xi[6:]
-        tips, e = sd.tip_positions_body(c, s)
-        tip_forces_world = thrust_world.copy()
-        platform_points = []
-        platform_forces_world = []
+        length = self._leg_length
         env = self.environment
-        mids = None
-        mid_forces = np.zeros((n, 3))
-        need_tip_velocity = self._ground_active or env.has_wind
-        if need_tip_velocity:
-            normals = sd.leg_normals_body(c, s)
-            tip_vel = (u + _cross3(w, tips) + (sd.leg_length * rates)[:, None] * normals) @ R.T
-            tip_pos = x[0:3] + tips @ R.T
-        if self._ground_active:
-            feet = tip_pos.copy()
-            feet[:, 2] -= self.gear
-            centre = x[0:3]
-            points = np.vstack([feet, centre[None, :]])
-            velocities = np.vstack([tip_vel, (R @ u)[None, :]])
-            ground = env.ground.forces(points, velocities)
-            tip_forces_world += ground[:n]
-            platform_points.append(np.zeros(3))
-            platform_forces_world.append(ground[n])
-        if env.has_wind:
-            air = self._wind
-            cfg = self.scenario.wind
-            tip_forces_world += cfg.uav_drag * (air - tip_vel)
-            mids = 0.5 * (tips + sd.anchors)
-            mid_vel = (u + _cross3(w, mids) + (0.5 * sd.leg_length * rates)[:, None] * normals) @ R.T
-            mid_forces = (cfg.leg_drag * (air - mid_vel)) @ R
-            platform_points.append(np.zeros(3))
-            platform_forces_world.append(cfg.platform_drag * (air - R @ u))
-        platform_moment = self._platform_moment
-        if self._platform_force is not None:
-            platform_points.append(np.zeros(3))
-            platform_forces_world.append(self._platform_force)
-        if env.board.enabled:
-            point_body = env.board_end_effector
-            point = x[0:3] + R @ point_body
-            velocity = R @ (u + _cross3(w, point_body))
-            force, normal = env.board_force(point, velocity)
+        px, py, pz, qw, qx, qy, qz = x[0:7]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(qw, qx, qy, qz)
+        xi = x[7 + n:]
+        u0, u1, u2, w0, w1, w2 = xi[:6]
+        ground = self._ground_active
+        wind = self._wind_list
+        need_velocity = ground or wind is not None
+        # platform force (world, at P) and Q̃ accumulators (Fp)
+        fp0, fp1, fp2 = self._platform_force_list
+        q0 = q1 = q2 = m0 = m1 = m2 = 0.0
+        joint = []
+        c_list, s_list = [], []
+        anchors_ground = self._anchor_list
+        for i in range(n):
+            theta = x[7 + i]
+            c = math.cos(theta)
+            s = math.sin(theta)
+            c_list.append(c)
+            s_list.append(s)
+            (a0, a1, a2), ca, sa = self._anchors[i], self._cos_alpha[i], self._sin_alpha[i]
+            e0, e1, e2 = ca * c, sa * c, -s
+            t0, t1, t2 = a0 + length * e0, a1 + length * e1, a2 + length * e2
+            f0, f1, f2 = thrust[i]
+            mid0 = mid1 = mid2 = 0.0  # leg-middle force, Fp
+            if need_velocity:
+                lr = length * xi[6 + i]
+                n0, n1, n2 = -ca * s, -sa * s, -c
+                b0 = u0 + w1 * t2 - w2 * t1 + lr * n0
+                b1 = u1 + w2 * t0 - w0 * t2 + lr * n1
+                b2 = u2 + w0 * t1 - w1 * t0 + lr * n2
+                v0 = r00 * b0 + r01 * b1 + r02 * b2
+                v1 = r10 * b0 + r11 * b1 + r12 * b2
+                v2 = r20 * b0 + r21 * b1 + r22 * b2
+                if ground:
+                    g0, g1, g2 = env.ground.point_force(
+                        anchors_ground[i], px + r00 * t0 + r01 * t1 + r02 * t2, py + r10 * t0 + r11 * t1 + r12 * t2,
+                        pz + r20 * t0 + r21 * t1 + r22 * t2 - self.gear, v0, v1, v2)
+                    f0 += g0
+                    f1 += g1
+                    f2 += g2
+                if wind is not None:
+                    air0, air1, air2 = wind
+                    drag = self._uav_drag
+                    f0 += drag * (air0 - v0)
+                    f1 += drag * (air1 - v1)
+                    f2 += drag * (air2 - v2)
+                    h0, h1, h2 = 0.5 * (t0 + a0), 0.5 * (t1 + a1), 0.5 * (t2 + a2)
+                    hl = 0.5 * lr
+                    b0 = u0 + w1 * h2 - w2 * h1 + hl * n0
+                    b1 = u1 + w2 * h0 - w0 * h2 + hl * n1
+                    b2 = u2 + w0 * h1 - w1 * h0 + hl * n2
+                    d0 = self._leg_drag * (air0 - (r00 * b0 + r01 * b1 + r02 * b2))
+                    d1 = self._leg_drag * (air1 - (r10 * b0 + r11 * b1 + r12 * b2))
+                    d2 = self._leg_drag * (air2 - (r20 * b0 + r21 * b1 + r22 * b2))
+                    mid0 = r00 * d0 + r10 * d1 + r20 * d2
+                    mid1 = r01 * d0 + r11 * d1 + r21 * d2
+                    mid2 = r02 * d0 + r12 * d1 + r22 * d2
+            # tip force in Fp
+            g0 = r00 * f0 + r10 * f1 + r20 * f2
+            g1 = r01 * f0 + r11 * f1 + r21 * f2
+            g2 = r02 * f0 + r12 * f1 + r22 * f2
+            q0 += g0 + mid0
+            q1 += g1 + mid1
+            q2 += g2 + mid2
+            m0 += t1 * g2 - t2 * g1
+            m1 += t2 * g0 - t0 * g2
+            m2 += t0 * g1 - t1 * g0
+            # lever of the joint moment: l e_i × (f_tip + f_mid / 2), and the mid force's moment about P
+            l0, l1, l2 = g0 + 0.5 * mid0, g1 + 0.5 * mid1, g2 + 0.5 * mid2
+            if mid0 or mid1 or mid2:
+                h0, h1, h2 = a0 + 0.5 * length * e0, a1 + 0.5 * length * e1, a2 + 0.5 * length * e2
+                m0 += h1 * mid2 - h2 * mid1
+                m1 += h2 * mid0 - h0 * mid2
+                m2 += h0 * mid1 - h1 * mid0
+            k0, k1, k2 = self._joint_axes[i]
+            joint.append(length * (k0 * (e1 * l2 - e2 * l1) + k1 * (e2 * l0 - e0 * l2) + k2 * (e0 * l1 - e1 * l0)))
+        if ground:
+            vc0 = r00 * u0 + r01 * u1 + r02 * u2
+            vc1 = r10 * u0 + r11 * u1 + r12 * u2
+            vc2 = r20 * u0 + r21 * u1 + r22 * u2
+            g0, g1, g2 = env.ground.point_force(anchors_ground[n], px, py, pz, vc0, vc1, vc2)
+            fp0 += g0
+            fp1 += g1
+            fp2 += g2
+        if wind is not None:
+            drag = self._platform_drag
+            fp0 += drag * (wind[0] - (r00 * u0 + r01 * u1 + r02 * u2))
+            fp1 += drag * (wind[1] - (r10 * u0 + r11 * u1 + r12 * u2))
+            fp2 += drag * (wind[2] - (r20 * u0 + r21 * u1 + r22 * u2))
+        if self._board_enabled:
+            e0, e1, e2 = self._end_effector
+            b0 = u0 + w1 * e2 - w2 * e1
+            b1 = u1 + w2 * e0 - w0 * e2
+            b2 = u2 + w0 * e1 - w1 * e0
+            (f0, f1, f2), normal = env.board_force_scalar(
+                (px + r00 * e0 + r01 * e1 + r02 * e2, py + r10 * e0 + r11 * e1 + r12 * e2,
+                 pz + r20 * e0 + r21 * e1 + r22 * e2),
+                (r00 * b0 + r01 * b1 + r02 * b2, r10 * b0 + r11 * b1 + r12 * b2, r20 * b0 + r21 * b1 + r22 * b2))
             self._stage_contact = normal
             if normal > 0.0:
-                platform_points.append(point_body)
-                platform_forces_world.append(force)
-        if platform_points:
-            pp = np.array(platform_points)
-            pf = np.array(platform_forces_world) @ R
-        else:
-            pp = self._no_points
-            pf = self._no_points
-        forces = PointForces(pp, pf, tip_forces_world @ R, mid_forces, platform_moment, self._zero_joint)
-        q_force = sd.generalized_forces(c, s, forces)
-        xi_dot = sd._body_acceleration(c, s, c2, s2, xi, R.T @ sd.gravity_vector, q_force)
-        dx = np.empty_like(x)
-        dx[0:3] = R @ u
-        qw, qx, qy, qz = quat
-        wx, wy, wz = w
-        dx[3] = 0.5 * (-qx * wx - qy * wy - qz * wz)
-        dx[4] = 0.5 * (qw * wx + qy * wz - qz * wy)
-        dx[5] = 0.5 * (qw * wy - qx * wz + qz * wx)
-        dx[6] = 0.5 * (qw * wz + qx * wy - qy * wx)
-        dx[7:7 + n] = rates
-        dx[7 + n:] = xi_dot
-        return dx
+                g0 = r00 * f0 + r10 * f1 + r20 * f2
+                g1 = r01 * f0 + r11 * f1 + r21 * f2
+                g2 = r02 * f0 + r12 * f1 + r22 * f2
+                q0 += g0
+                q1 += g1
+                q2 += g2
+                m0 += e1 * g2 - e2 * g1
+                m1 += e2 * g0 - e0 * g2
+                m2 += e0 * g1 - e1 * g0
+        mo0, mo1, mo2 = self._platform_moment_list
+        q_force = [q0 + r00 * fp0 + r10 * fp1 + r20 * fp2, q1 + r01 * fp0 + r11 * fp1 + r21 * fp2,
+                   q2 + r02 * fp0 + r12 * fp1 + r22 * fp2, m0 + mo0, m1 + mo1, m2 + mo2] + joint
+        gx, gy, gz = self._gravity
+        g_body = [r00 * gx + r10 * gy + r20 * gz, r01 * gx + r11 * gy + r21 * gz, r02 * gx + r12 * gy + r22 * gz]
+        xi_dot = self.structure.accelerate(c_list, s_list, xi, g_body, q_force)
+        return [r00 * u0 + r01 * u1 + r02 * u2, r10 * u0 + r11 * u1 + r12 * u2, r20 * u0 + r21 * u1 + r22 * u2,
+                0.5 * (-qx * w0 - qy * w1 - qz * w2), 0.5 * (qw * w0 + qy * w2 - qz * w1),
+                0.5 * (qw * w1 - qx * w2 + qz * w0), 0.5 * (qw * w2 + qx * w1 - qy * w0)] + xi[6:] + xi_dot
 
     def set_command(self, command: AttitudeCommand) -> None:
         """Setpoints of the n PX4 attitude controllers (ENU/FLU attitudes, normalized thrusts, armed flags)."""
@@ -282,69 +389,98 @@ class Plant:
         payload = env.payload_mass(self.time)
         if payload != self.structure.payload_mass:
             self.structure.set_payload_mass(payload)
-        tip_pos, tip_vel = self._tip_kinematics(self._x)
-        margin = 0.05 + 2.0 * np.abs(tip_vel[:, 2]).max() * dt
-        self._ground_active = bool(self.scenario.ground.enabled and (
-            (tip_pos[:, 2] - self.gear).min() < self.scenario.ground.height + margin
-            or self._x[2] < self.scenario.ground.height + margin))
-        self._wind = env.wind_velocity(self.time) if env.has_wind else None
-        force, moment = env.platform_wrench(self.time)
-        self._platform_force = force if force.any() else None
-        self._platform_moment = moment
-        self._no_points = np.zeros((0, 3))
-        self._zero_joint = np.zeros(n)
+        x = self._x_list
+        if self._tips is None:
+            self._tips = self._tip_kinematics_list(x)
+        tip_pos, tip_vel = self._tips
+        ground_cfg = self.scenario.ground
+        self._ground_active = False
+        if ground_cfg.enabled:
+            margin = 0.05 + 2.0 * max(abs(v[2]) for v in tip_vel) * dt
+            self._ground_active = (min(p[2] for p in tip_pos) - self.gear < ground_cfg.height + margin
+                                   or x[2] < ground_cfg.height + margin)
+        self._anchor_list = env.ground.anchors.tolist()
+        self._wind_list = env.wind_velocity(self.time).tolist() if env.has_wind else None
+        if self.scenario.external_wrenches:
+            force, moment = env.platform_wrench(self.time)
+            self._platform_force_list = force.tolist()
+            self._platform_moment_list = moment.tolist()
+        else:
+            self._platform_force_list = self._platform_moment_list = (0.0, 0.0, 0.0)
         self._stage_contact = 0.0
-        thrust = fleet.thrust_vectors()
-        x = self._x
-        k1 = self._derivative(x, thrust, payload)
+        thrust = fleet.thrust_vectors_list()
+        # classical RK4 on the structure state (thrusts held over the step)
+        h = 0.5 * dt
+        k1 = self._derivative(x, thrust)
         contact = self._stage_contact
-        k2 = self._derivative(x + 0.5 * dt * k1, thrust, payload)
-        k3 = self._derivative(x + 0.5 * dt * k2, thrust, payload)
-        k4 = self._derivative(x + dt * k3, thrust, payload)
-        x = x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        x[3:7] /= np.sqrt(x[3:7] @ x[3:7])
-        self._x = x
+        k2 = self._derivative([a + h * b for a, b in zip(x, k1, strict=True)], thrust)
+        k3 = self._derivative([a + h * b for a, b in zip(x, k2, strict=True)], thrust)
+        k4 = self._derivative([a + dt * b for a, b in zip(x, k3, strict=True)], thrust)
+        sixth = dt / 6.0
+        x = [a + sixth * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)]
+        norm = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5] + x[6] * x[6])
+        x[3:7] = [x[3] / norm, x[4] / norm, x[5] / norm, x[6] / norm]
+        self._set_x(x)
         self._contact_force = contact
         # environment forces on the quadrotors at the new state (for the leg force and the reported wrench)
-        tip_pos, tip_vel = self._tip_kinematics(x)
-        env_uav = np.zeros((n, 3))
+        tip_pos, tip_vel = self._tips = self._tip_kinematics_list(x)
+        env_uav = [[0.0, 0.0, 0.0] for _ in range(n)]
         if self._ground_active:
-            feet = tip_pos.copy()
-            feet[:, 2] -= self.gear
-            env.ground.update_anchors(np.vstack([feet, x[None, 0:3]]))
-            env_uav += env.ground.forces(np.vstack([feet, x[None, 0:3]]),
-                                         np.vstack([tip_vel, _rotmat(x[3:7]) @ x[7 + n:10 + n]]))[:n]
-        if self._wind is not None:
-            env_uav += self.scenario.wind.uav_drag * (self._wind - tip_vel)
-        self._tip_acceleration = (tip_vel - self._tip_velocity) / dt
-        self._tip_velocity = tip_vel
-        self._env_uav_forces = env_uav
-        # spherical-joint offset moment (2.93) on each quadrotor, body frame
-        leg_force = self.uav_masses[:, None] * (self._tip_acceleration - self.params.gravity_vector) - thrust - env_uav
-        Rb = _batch_rotmat(fleet.quat)
-        lever = Rb @ self.joint_offset  # (n, 3) world: B_i -> S_i
-        moment_world = _cross3(lever, leg_force)
-        body_moment = np.einsum("nji,nj->ni", Rb, moment_world)
-        on_ground = self._ground_active and bool(np.any(env.ground.anchors[:n, 0] == env.ground.anchors[:n, 0]))
-        if on_ground:
-            body_moment = body_moment + self._ground_leveling_moment(Rb)
+            feet = [(p[0], p[1], p[2] - self.gear) for p in tip_pos]
+            env.ground.update_anchors(feet + [tuple(x[0:3])])
+            anchors = env.ground.anchors.tolist()
+            for i in range(n):
+                env_uav[i] = list(env.ground.point_force(anchors[i], *feet[i], *tip_vel[i]))
+        if self._wind_list is not None:
+            drag = self._uav_drag
+            for i in range(n):
+                for k in range(3):
+                    env_uav[i][k] += drag * (self._wind_list[k] - tip_vel[i][k])
+        # spherical-joint offset moment (2.93) on each quadrotor, body frame: m = d_b × (R_biᵀ f_l,i),
+        # f_l,i = m_b,i a_i − f_i − m_b,i g − f_env,i with a_i the tip acceleration over the step
+        gx, gy, gz = self._gravity
+        d0, d1, d2 = self._joint_offset
+        body_moments = []
+        accelerations = []
+        landed = self._ground_active and any(a[0] == a[0] for a in env.ground.anchors[:n].tolist())
+        uav_quats = fleet.quat_list()
+        for i in range(n):
+            acc = [(tip_vel[i][k] - self._tip_velocity_list[i][k]) / dt for k in range(3)]
+            accelerations.append(acc)
+            mass = self._uav_masses[i]
+            f0 = mass * (acc[0] - gx) - thrust[i][0] - env_uav[i][0]
+            f1 = mass * (acc[1] - gy) - thrust[i][1] - env_uav[i][1]
+            f2 = mass * (acc[2] - gz) - thrust[i][2] - env_uav[i][2]
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(*uav_quats[i])
+            b0 = r00 * f0 + r10 * f1 + r20 * f2
+            b1 = r01 * f0 + r11 * f1 + r21 * f2
+            b2 = r02 * f0 + r12 * f1 + r22 * f2
+            body_moments.append([d1 * b2 - d2 * b1, d2 * b0 - d0 * b2, d0 * b1 - d1 * b0])
+        if landed:
+            self._add_ground_leveling_moment(body_moments, uav_quats)
+        self._tip_velocity_list = tip_vel
+        self._tip_acceleration_list = accelerations
         if self.ideal_attitude:
             fleet.battery.update(fleet.thrust(), dt)
         else:
-            fleet.step(dt, body_moment)
+            fleet.step(dt, body_moments)
         self.time = (self.steps + 1) * dt
         self.steps += 1
 
-    def _ground_leveling_moment(self, Rb: np.ndarray) -> np.ndarray:
+    def _add_ground_leveling_moment(self, body_moments: list[list[float]], uav_quats: list[list[float]]) -> None:
         """Moment of the landing gear on quadrotors standing on the ground: a stiff torsional spring-damper
         towards level (roll/pitch only), for the quadrotors whose feet touch (anchor set)."""
-        touching = ~np.isnan(self.environment.ground.anchors[:self.n, 0])
-        up_body = Rb[:, 2, :]  # world z in body coordinates (rows of Rbᵀ)
-        tilt = _cross3(up_body, [0.0, 0.0, 1.0])  # body-frame axis·sin(angle) from body z to world up
-        weight = self.uav_masses * self.params.gravity
-        stiffness = (weight * 0.5 * self.scenario.quadrotor.arm_length * 4.0)[:, None]
-        moment = -stiffness * tilt - 0.2 * self.fleet.rate * np.array([1.0, 1.0, 0.0])
-        return moment * touching[:, None]
+        anchors = self.environment.ground.anchors[:self.n, 0].tolist()
+        rates = self.fleet.rate.tolist()
+        arm = self.scenario.quadrotor.arm_length
+        for i, anchor in enumerate(anchors):
+            if anchor != anchor:  # NaN: not touching
+                continue
+            _, _, _, _, _, _, up0, up1, _ = rotation_entries(*uav_quats[i])  # world z in body coordinates
+            stiffness = self._uav_masses[i] * self.params.gravity * 0.5 * arm * 4.0
+            # tilt = up_body × e_z (body-frame axis·sin(angle) from body z to world up)
+            body_moments[i][0] += -stiffness * up1 - 0.2 * rates[i][0]
+            body_moments[i][1] += stiffness * up0 - 0.2 * rates[i][1]
 
     # ---------------------------------------------------------------------------------------------- outputs
     def ground_truth(self) -> GroundTruth:

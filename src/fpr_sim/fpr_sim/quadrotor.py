@@ -18,11 +18,12 @@ Vectorized over the n vehicles (arrays with a leading axis n). Per vehicle, with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from fpr_model.battery import ThrustCoefficients
-from fpr_model.rotations import quat_error, quat_to_rotmat
+from fpr_model.rotations import quat_error
 
 from fpr_sim.scenario import BatteryConfig, Px4Config, QuadrotorConfig, per_uav
 
@@ -41,12 +42,19 @@ class AttitudeCommand:
 
 
 class Battery:
-    """Per-vehicle battery: ``V = V_oc(Q_used) − R·I`` with ``I = k_I·f_t`` and linear V_oc (see BatteryConfig)."""
+    """Per-vehicle battery: ``V = V_oc(Q_used) − R·I`` with ``I = k_I·f_t`` and linear V_oc (see BatteryConfig).
+
+    ``charge_used`` [A h] and ``current`` [A] are (n,) arrays (stored as floats for the 1 kHz loop)."""
 
     def __init__(self, config: BatteryConfig, n: int) -> None:
         self.config = config
-        self.charge_used = np.array([float(per_uav(config.initial_charge_used, i)) for i in range(n)])  # [A h]
-        self.current = np.zeros(n)
+        self._charge_used = [float(per_uav(config.initial_charge_used, i)) for i in range(n)]
+        self._current = [0.0] * n
+
+    charge_used = property(lambda self: np.array(self._charge_used),
+                           lambda self, value: setattr(self, "_charge_used", _floats(value)))
+    current = property(lambda self: np.array(self._current),
+                       lambda self, value: setattr(self, "_current", _floats(value)))
 
     def open_circuit_voltage(self) -> np.ndarray:
         """[V]: linear from full to empty over the capacity, then constant."""
@@ -62,10 +70,11 @@ class Battery:
         """Remaining charge fraction in [0, 1]."""
         return np.clip(1.0 - self.charge_used / self.config.capacity, 0.0, 1.0)
 
-    def update(self, thrust: np.ndarray, dt: float) -> None:
-        """Draw ``current_per_newton · thrust`` [A] during ``dt`` [s]."""
-        self.current = self.config.current_per_newton * np.maximum(thrust, 0.0)
-        self.charge_used = self.charge_used + self.current * dt / 3600.0
+    def update(self, thrust, dt: float) -> None:
+        """Draw ``current_per_newton · thrust`` [A] during ``dt`` [s]; ``thrust`` (n,) [N]."""
+        k = self.config.current_per_newton
+        self._current = current = [k * max(t, 0.0) for t in _floats(thrust)]
+        self._charge_used = [q + i * dt / 3600.0 for q, i in zip(self._charge_used, current, strict=True)]
 
 
 def mix(collective: np.ndarray, moments: np.ndarray, arm: float, kappa: float, rotor_max: np.ndarray) -> np.ndarray:
@@ -73,27 +82,40 @@ def mix(collective: np.ndarray, moments: np.ndarray, arm: float, kappa: float, r
 
     ``arm`` d [m], ``kappa`` c_Q/c_T [m], ``rotor_max`` (n,) [N]. Moments are kept when possible: the
     collective part is shifted down (up) when a rotor exceeds its maximum (goes below 0), then all are clipped.
+    See :func:`mix_one` (one vehicle, plain floats).
     """
-    mx, my, mz = moments[:, 0], moments[:, 1], moments[:, 2]
+    return np.array([mix_one(f, m, arm, kappa, top) for f, m, top in
+                     zip(_floats(collective), np.asarray(moments, dtype=float).tolist(), _floats(rotor_max),
+                         strict=True)]).reshape(-1, 4)
+
+
+def mix_one(collective: float, moments: list[float], arm: float, kappa: float, rotor_max: float) -> list[float]:
+    """:func:`mix` for one vehicle: inverse of the "+" allocation (3.41) (rotor 1 front +x, 2 left +y, 3 back,
+    4 right; ``T_1..4`` [N]), collective shifted to keep the moments under saturation, clipped to [0, rotor_max]."""
+    mx, my, mz = moments
     quarter = 0.25 * collective
-    dm = np.stack([-my / (2 * arm) - mz / (4 * kappa), mx / (2 * arm) + mz / (4 * kappa),
-                   my / (2 * arm) - mz / (4 * kappa), -mx / (2 * arm) + mz / (4 * kappa)], axis=1)
-    rotors = quarter[:, None] + dm
-    over = np.maximum(rotors.max(axis=1) - rotor_max, 0.0)
-    rotors = rotors - over[:, None]
-    under = np.maximum(-rotors.min(axis=1), 0.0)
-    rotors = rotors + under[:, None]
-    return np.clip(rotors, 0.0, rotor_max[:, None])
+    rotors = [quarter + (-my / (2 * arm) - mz / (4 * kappa)), quarter + (mx / (2 * arm) + mz / (4 * kappa)),
+              quarter + (my / (2 * arm) - mz / (4 * kappa)), quarter + (-mx / (2 * arm) + mz / (4 * kappa))]
+    over = max(max(rotors) - rotor_max, 0.0)
+    rotors = [r - over for r in rotors]
+    under = max(-min(rotors), 0.0)
+    return [min(max(r + under, 0.0), rotor_max) for r in rotors]
 
 
 class QuadrotorFleet:
-    """State and low-level control of the n quadrotors (see the module doc for the equations)."""
+    """State and low-level control of the n quadrotors (see the module doc for the equations).
+
+    The state arrays ``quat`` (n, 4), ``rate`` (n, 3), ``rotors`` (n, 4) [N], ``rotor_commands``,
+    ``rate_integral``, ``previous_rate`` and ``rate_setpoint`` (n, 3) are stored as plain floats for the
+    1 kHz loop; reading one returns a numpy copy, assigning one replaces it.
+    """
 
     def __init__(self, n: int, quad: QuadrotorConfig, px4: Px4Config, battery: BatteryConfig) -> None:
         self.n = n
         self.inertia = np.array(quad.inertia, dtype=float)  # diagonal (3,)
         if self.inertia.shape != (3,) or (self.inertia <= 0).any():
             raise ValueError(f"quadrotor.inertia: expected 3 positive diagonal values, got {quad.inertia}")
+        self._inertia = tuple(self.inertia.tolist())
         self.arm = float(quad.arm_length)
         self.kappa = float(quad.torque_coefficient)
         self.motor_tau = float(quad.motor_time_constant)
@@ -115,82 +137,143 @@ class QuadrotorFleet:
         self.rate_setpoint = np.zeros((n, 3))
         self.f_max = self.max_thrust()
 
+    quat = property(lambda self: np.array(self._quat), lambda self, value: setattr(self, "_quat", _rows(value)))
+    rate = property(lambda self: np.array(self._rate), lambda self, value: setattr(self, "_rate", _rows(value)))
+    rotors = property(lambda self: np.array(self._rotors),
+                      lambda self, value: setattr(self, "_rotors", _rows(value)))
+    rotor_commands = property(lambda self: np.array(self._rotor_commands),
+                              lambda self, value: setattr(self, "_rotor_commands", _rows(value)))
+    rate_integral = property(lambda self: np.array(self._rate_integral),
+                             lambda self, value: setattr(self, "_rate_integral", _rows(value)))
+    previous_rate = property(lambda self: np.array(self._previous_rate),
+                             lambda self, value: setattr(self, "_previous_rate", _rows(value)))
+    rate_setpoint = property(lambda self: np.array(self._rate_setpoint),
+                             lambda self, value: setattr(self, "_rate_setpoint", _rows(value)))
+
     # ----------------------------------------------------------------------------------------------
     def max_thrust(self) -> np.ndarray:
         """f_max(V) [N] per vehicle, (C.2) with the present battery voltage (never negative)."""
         voltage = self.battery.voltage()
         return np.array([max(0.0, c.max_thrust(float(v))) for c, v in zip(self.coefficients, voltage, strict=True)])
 
+    def quat_list(self) -> list[list[float]]:
+        """The attitudes [w,x,y,z] (FLU -> ENU) as plain floats (not a copy: do not modify)."""
+        return self._quat
+
     def thrust(self) -> np.ndarray:
         """Actual collective thrust along body +z [N], (n,)."""
-        return self.rotors.sum(axis=1)
+        return np.array([sum(r) for r in self._rotors])
 
     def thrust_vectors(self) -> np.ndarray:
         """Thrust vectors in the world frame f_i = R_bi [0, 0, f_t,i] [N], (n, 3)."""
-        return quat_to_rotmat(self.quat)[:, :, 2] * self.thrust()[:, None]
+        return np.array(self.thrust_vectors_list())
+
+    def thrust_vectors_list(self) -> list[tuple[float, float, float]]:
+        """:meth:`thrust_vectors` as plain floats (the 1 kHz loop): third column of (A.60) times f_t."""
+        out = []
+        for (w, x, y, z), (t1, t2, t3, t4) in zip(self._quat, self._rotors, strict=True):
+            f = t1 + t2 + t3 + t4
+            out.append((2.0 * (x * z + w * y) * f, 2.0 * (y * z - w * x) * f, (w * w - x * x - y * y + z * z) * f))
+        return out
 
     def hover_rotor_state(self, thrust: np.ndarray) -> None:
         """Set rotors (and their commands) to produce ``thrust`` [N] (n,) with zero moment (initial hover)."""
-        self.rotors = np.repeat(0.25 * np.asarray(thrust, dtype=float)[:, None], 4, axis=1)
-        self.rotor_commands = self.rotors.copy()
+        self._rotors = [[0.25 * t] * 4 for t in _floats(thrust)]
+        self._rotor_commands = [list(r) for r in self._rotors]
 
     # ----------------------------------------------------------------------------------------------
     def control(self, command: AttitudeCommand, measured_rate: np.ndarray | None = None) -> None:
-        """One PX4 attitude + rate controller update (3.39)-(3.41), held for ``controller_period``."""
+        """One PX4 attitude + rate controller update (3.39)-(3.41), held for ``controller_period``.
+
+        Per vehicle and axis: ``ω_d = clip(2 P sgn(q_err,0) q_err,1:3 + ω_ff, ±ω_max)`` (3.39) with
+        ``q_err = q⁻¹ ∘ q_d`` (fpr_model.rotations.quat_error), ``m = K_P ε + K_I ∫ε − K_D ω̇`` (3.40; integral
+        reset while disarmed and clamped to ``|K_I ∫ε| ≤ limit``), rotor commands by :func:`mix_one` (3.41)
+        from ``f_t = clip(u_f, 0, 1)·f_max(V)``; zero while disarmed."""
         dt = self.controller_period
-        rate = self.rate if measured_rate is None else measured_rate
+        rates = self._rate if measured_rate is None else _rows(measured_rate)
         self.f_max = self.max_thrust()
-        err = quat_error(self.quat, command.quat)
-        sign = np.where(err[:, :1] >= 0.0, 1.0, -1.0)
-        rate_sp = 2.0 * self.attitude_p * sign * err[:, 1:]
-        if command.rate_feedforward is not None:
-            rate_sp = rate_sp + command.rate_feedforward
-        rate_sp = np.clip(rate_sp, -self.max_rate, self.max_rate)
-        self.rate_setpoint = rate_sp
-        error = rate_sp - rate
-        armed = np.asarray(command.armed, dtype=bool)
-        self.rate_integral = np.where(armed[:, None], self.rate_integral + error * dt, 0.0)
-        bound = self.integrator_limit / np.maximum(self.rate_i, 1e-12)
-        self.rate_integral = np.clip(self.rate_integral, -bound, bound)
-        derivative = (rate - self.previous_rate) / dt  # on the measurement (PX4)
-        moments = self.rate_p * error + self.rate_i * self.rate_integral - self.rate_d * derivative
-        self.previous_rate = rate.copy()
-        u = np.clip(np.nan_to_num(command.thrust, nan=0.0), 0.0, 1.0)
-        collective = u * self.f_max
-        commands = mix(collective, moments, self.arm, self.kappa, 0.25 * self.f_max)
-        self.rotor_commands = np.where(armed[:, None], commands, 0.0)
+        errors = quat_error(np.array(self._quat), command.quat).tolist()
+        feedforward = None if command.rate_feedforward is None else _rows(command.rate_feedforward)
+        armed = np.asarray(command.armed, dtype=bool).tolist()
+        thrusts = _floats(command.thrust)
+        gains = (self.attitude_p.tolist(), self.rate_p.tolist(), self.rate_i.tolist(), self.rate_d.tolist(),
+                 self.max_rate.tolist())
+        attitude_p, rate_p, rate_i, rate_d, max_rate = gains
+        bounds = [self.integrator_limit / max(k, 1e-12) for k in rate_i]
+        setpoints, integrals, commands = [], [], []
+        for i, (err, rate, previous, integral) in enumerate(
+                zip(errors, rates, self._previous_rate, self._rate_integral, strict=True)):
+            sign = 1.0 if err[0] >= 0.0 else -1.0
+            setpoint, new_integral, moments = [], [], []
+            for k in range(3):
+                sp = 2.0 * attitude_p[k] * sign * err[1 + k]
+                if feedforward is not None:
+                    sp += feedforward[i][k]
+                sp = min(max(sp, -max_rate[k]), max_rate[k])
+                error = sp - rate[k]
+                acc = integral[k] + error * dt if armed[i] else 0.0
+                acc = min(max(acc, -bounds[k]), bounds[k])
+                derivative = (rate[k] - previous[k]) / dt  # on the measurement (PX4)
+                setpoint.append(sp)
+                new_integral.append(acc)
+                moments.append(rate_p[k] * error + rate_i[k] * acc - rate_d[k] * derivative)
+            setpoints.append(setpoint)
+            integrals.append(new_integral)
+            u = thrusts[i]
+            u = 0.0 if u != u else min(max(u, 0.0), 1.0)
+            f_max = float(self.f_max[i])
+            rotors = mix_one(u * f_max, moments, self.arm, self.kappa, 0.25 * f_max)
+            commands.append(rotors if armed[i] else [0.0, 0.0, 0.0, 0.0])
+        self._rate_setpoint = setpoints
+        self._rate_integral = integrals
+        self._previous_rate = [list(r) for r in rates]
+        self._rotor_commands = commands
 
     # ----------------------------------------------------------------------------------------------
-    def _derivatives(self, quat, rate, rotors, body_moment):
-        inertia = self.inertia
-        t1, t2, t3, t4 = rotors[:, 0], rotors[:, 1], rotors[:, 2], rotors[:, 3]
-        moment = np.stack([self.arm * (t2 - t4), self.arm * (t3 - t1), self.kappa * (-t1 + t2 - t3 + t4)], axis=1)
-        moment = moment + body_moment
-        h = rate * inertia
-        w0, w1, w2 = rate[:, 0], rate[:, 1], rate[:, 2]
-        gyroscopic = np.stack([w1 * h[:, 2] - w2 * h[:, 1], w2 * h[:, 0] - w0 * h[:, 2], w0 * h[:, 1] - w1 * h[:, 0]],
-                              axis=1)
-        rate_dot = (moment - gyroscopic) / inertia
-        qw, qx, qy, qz = quat[:, 0], quat[:, 1], quat[:, 2], quat[:, 3]
-        quat_dot = 0.5 * np.stack([-qx * w0 - qy * w1 - qz * w2, qw * w0 + qy * w2 - qz * w1,
-                                   qw * w1 - qx * w2 + qz * w0, qw * w2 + qx * w1 - qy * w0], axis=1)
-        rotor_dot = (self.rotor_commands - rotors) / self.motor_tau
-        return quat_dot, rate_dot, rotor_dot
+    def step(self, dt: float, body_moment) -> None:
+        """Advance (2.92) and the motor lag by ``dt`` [s] with classical RK4; ``body_moment`` (n, 3) [N m] FLU.
 
-    def step(self, dt: float, body_moment: np.ndarray) -> None:
-        """Advance (2.92) and the motor lag by ``dt`` [s] with RK4; ``body_moment`` (n, 3) [N m] in FLU."""
-        q0, w0, r0 = self.quat, self.rate, self.rotors
-        k1 = self._derivatives(q0, w0, r0, body_moment)
+        Plain floats per vehicle. The motor lag ``Ṫ = (T_cmd − T)/τ_m`` is linear with a held command, so its
+        RK4 stage values are evaluated in closed form: with ``e = T_cmd − T_0`` and ``a = dt/τ_m`` the stage
+        slopes are ``k_s = β_s e/τ_m``, ``β = [1, 1 − a/2, 1 − a/2 + a²/4, 1 − a + a²/2 − a³/4]``, identical to
+        stepping the 4 rotor states through the 4 stages; the rotor moments of each stage follow linearly."""
+        moments = body_moment if isinstance(body_moment, list) else _rows(body_moment)
+        i0, i1, i2 = self._inertia
+        arm = self.arm
+        kappa = self.kappa
+        tau = self.motor_tau
+        a = dt / tau
+        beta2 = 1.0 - 0.5 * a
+        beta3 = 1.0 - 0.5 * a * beta2
+        beta4 = 1.0 - a * beta3
         h = 0.5 * dt
-        k2 = self._derivatives(q0 + h * k1[0], w0 + h * k1[1], r0 + h * k1[2], body_moment)
-        k3 = self._derivatives(q0 + h * k2[0], w0 + h * k2[1], r0 + h * k2[2], body_moment)
-        k4 = self._derivatives(q0 + dt * k3[0], w0 + dt * k3[1], r0 + dt * k3[2], body_moment)
         sixth = dt / 6.0
-        quat = q0 + sixth * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-        self.quat = quat / np.linalg.norm(quat, axis=1, keepdims=True)
-        self.rate = w0 + sixth * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-        self.rotors = np.clip(r0 + sixth * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]), 0.0, None)
-        self.battery.update(self.thrust(), dt)
+        quats, rates, rotors = [], [], []
+        for q, w, r, cmd, m in zip(self._quat, self._rate, self._rotors, self._rotor_commands, moments, strict=True):
+            t1, t2, t3, t4 = r
+            e1, e2, e3, e4 = cmd[0] - t1, cmd[1] - t2, cmd[2] - t3, cmd[3] - t4
+            # moment of the rotors at T_0 (plus the external moment) and its change per unit stage offset of T
+            base = (arm * (t2 - t4) + m[0], arm * (t3 - t1) + m[1], kappa * (-t1 + t2 - t3 + t4) + m[2])
+            slope = (arm * (e2 - e4) / tau, arm * (e3 - e1) / tau, kappa * (-e1 + e2 - e3 + e4) / tau)
+            # stage s evaluates the rotors at T_0 + offset_s·e/τ_m (offsets 0, h, h·β2, dt·β3)
+            y = q + w
+            k1 = _attitude_derivative(y, base, slope, 0.0, i0, i1, i2)
+            k2 = _attitude_derivative([u + h * v for u, v in zip(y, k1, strict=True)], base, slope, h, i0, i1, i2)
+            k3 = _attitude_derivative([u + h * v for u, v in zip(y, k2, strict=True)], base, slope, h * beta2,
+                                      i0, i1, i2)
+            k4 = _attitude_derivative([u + dt * v for u, v in zip(y, k3, strict=True)], base, slope, dt * beta3,
+                                      i0, i1, i2)
+            y = [u + sixth * (v1 + 2 * v2 + 2 * v3 + v4) for u, v1, v2, v3, v4 in zip(y, k1, k2, k3, k4, strict=True)]
+            norm = math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2] + y[3] * y[3])
+            quats.append([y[0] / norm, y[1] / norm, y[2] / norm, y[3] / norm])
+            rates.append(y[4:7])
+            gain = sixth * (1.0 + 2.0 * beta2 + 2.0 * beta3 + beta4) / tau
+            rotors.append([max(t1 + gain * e1, 0.0), max(t2 + gain * e2, 0.0), max(t3 + gain * e3, 0.0),
+                           max(t4 + gain * e4, 0.0)])
+        self._quat = quats
+        self._rate = rates
+        self._rotors = rotors
+        self.battery.update([r[0] + r[1] + r[2] + r[3] for r in rotors], dt)
 
     def set_ideal(self, command: AttitudeCommand) -> None:
         """Ideal tracking (tests): attitude = setpoint, rates 0, thrust = u_f·f_max(V) at once."""
@@ -200,3 +283,29 @@ class QuadrotorFleet:
         u = np.clip(np.nan_to_num(command.thrust, nan=0.0), 0.0, 1.0)
         thrust = np.where(np.asarray(command.armed, dtype=bool), u * self.f_max, 0.0)
         self.hover_rotor_state(thrust)
+
+
+def _rows(value) -> list[list[float]]:
+    """A 2-D array-like as a list of lists of floats (a copy)."""
+    if isinstance(value, list):
+        return [list(map(float, row)) for row in value]
+    return np.asarray(value, dtype=float).tolist()
+
+
+def _floats(value) -> list[float]:
+    """A 1-D array-like (or scalar) as a list of floats."""
+    return np.atleast_1d(np.asarray(value, dtype=float)).tolist()
+
+
+
+def _attitude_derivative(y: list[float], base: tuple, slope: tuple, offset: float, i0: float, i1: float,
+                         i2: float) -> tuple[float, ...]:
+    """d/dt of one vehicle's [q (4), ω (3)] by (2.92): ``q̇ = ½ q ∘ [0, ω]``, ``I ω̇ = m − ω × I ω`` with the
+    body moment ``m = base + offset·slope`` (rotor moments of (3.41) at this RK4 stage plus the external one)."""
+    qw, qx, qy, qz, w0, w1, w2 = y
+    h0, h1, h2 = w0 * i0, w1 * i1, w2 * i2
+    return (0.5 * (-qx * w0 - qy * w1 - qz * w2), 0.5 * (qw * w0 + qy * w2 - qz * w1),
+            0.5 * (qw * w1 - qx * w2 + qz * w0), 0.5 * (qw * w2 + qx * w1 - qy * w0),
+            (base[0] + offset * slope[0] - (w1 * h2 - w2 * h1)) / i0,
+            (base[1] + offset * slope[1] - (w2 * h0 - w0 * h2)) / i1,
+            (base[2] + offset * slope[2] - (w0 * h1 - w1 * h0)) / i2)

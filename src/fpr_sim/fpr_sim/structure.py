@@ -23,12 +23,14 @@ The result is checked against ``fpr_model.dynamics`` (mass matrix, Coriolis, gra
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from fpr_model.geometry import model_constants
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_rotmat
+from scipy.linalg.lapack import dposv as _cholesky_solve
 
 __all__ = ["PointForces", "StructureDynamics", "StructureState"]
 
@@ -189,29 +191,59 @@ class StructureDynamics:
 
     def body_acceleration(self, leg_angles, body_velocity, body_gravity, generalized_force) -> np.ndarray:
         """ξ̇ from M̃ ξ̇ = b(ξ) + M̃[:, :3] g_b + Q̃ − Σ θ̇_i ∂_iM̃ ξ (module doc); body_gravity = R_pᵀ g_vec."""
-        c, s, c2, s2 = self.leg_trig(leg_angles)
-        return self._body_acceleration(c, s, c2, s2, body_velocity, body_gravity, generalized_force)
+        c = [math.cos(a) for a in np.asarray(leg_angles, dtype=float).tolist()]
+        s = [math.sin(a) for a in np.asarray(leg_angles, dtype=float).tolist()]
+        g = np.asarray(body_gravity, dtype=float).tolist()
+        return np.array(self.accelerate(c, s, np.asarray(body_velocity, dtype=float).tolist(), g,
+                                        np.asarray(generalized_force, dtype=float).tolist()))
 
-    def _body_acceleration(self, c, s, c2, s2, xi, g_body, q_force) -> np.ndarray:
+    def accelerate(self, c: list[float], s: list[float], xi: list[float], g_body: list[float],
+                   q_force: list[float]) -> list[float]:
+        """The 1 kHz kernel of :meth:`body_acceleration` on plain floats (lists), few numpy calls.
+
+        ``c``, ``s``: cos θ_i, sin θ_i; ``xi`` = [u, ω, θ̇] (6+n); ``g_body`` = R_pᵀ g_vec (3); ``q_force`` Q̃ (6+n).
+        Returns ξ̇ (6+n). Same equations as the module doc: M̃ from the fitted basis (one matmul), the rows
+        ``B_ik ξ`` of every leg basis matrix (one matmul) give both ``Σ θ̇_i ∂_iM̃ ξ`` and ``½ ξᵀ ∂_iM̃ ξ``, the
+        Kirchhoff terms b(ξ) in floats, and a Cholesky solve (M̃ is symmetric positive definite).
+        """
         n = self.n
-        M = self._mass(c, s, c2, s2)
-        mu = M @ xi
-        # ∂M̃/∂θ_i ξ for every leg: coefficients of d/dθ [c, s, c2, s2] = [-s, c, -2 s2, 2 c2]
-        k_xi = (self._leg_basis_stack @ xi).reshape(n, 4, 6 + n)
-        dcoef = np.stack([-s, c, -2.0 * s2, 2.0 * c2], axis=1)  # (n, 4)
-        dm_xi = np.einsum("ik,ikj->ij", dcoef, k_xi)  # (n, 6+n)
+        coef = [1.0]
+        rate_weights = []  # θ̇_i · d/dθ_i [c, s, c2, s2] = θ̇_i [-s, c, -2 s2, 2 c2]
+        slopes = []  # d/dθ_i [c, s, c2, s2]
+        for i in range(n):
+            ci = c[i]
+            si = s[i]
+            c2 = ci * ci - si * si
+            s2 = 2.0 * si * ci
+            coef += (ci, si, c2, s2)
+            rate = xi[6 + i]
+            slopes += (-si, ci, -2.0 * s2, 2.0 * c2)
+            rate_weights += (-si * rate, ci * rate, -2.0 * s2 * rate, 2.0 * c2 * rate)
+        n9 = 6 + n
+        M = (np.array(coef) @ self._basis).reshape(n9, n9)
+        pair = np.array([xi, g_body + [0.0] * (3 + n)])  # rows ξ and [g_b, 0]
+        xi_arr = pair[0]
+        mu, gravity_rhs = (pair @ M).tolist()  # M̃ symmetric: ξᵀ M̃ = (M̃ ξ)ᵀ; gravity: M̃[:, :3] g_b
+        rows = (self._leg_basis_stack @ xi_arr).reshape(4 * n, n9)  # B_ik ξ
+        m_dot_xi = (np.array(rate_weights) @ rows).tolist()  # Σ_i θ̇_i ∂_iM̃ ξ  (= dM̃/dt ξ)
+        quadratic = (rows @ xi_arr).tolist()  # ξᵀ B_ik ξ
         u0, u1, u2, w0, w1, w2 = xi[:6]
         p0, p1, p2, r0, r1, r2 = mu[:6]
-        rhs = M[:, :3] @ g_body + q_force
+        rhs = [gravity_rhs[k] + q_force[k] - m_dot_xi[k] for k in range(n9)]
         rhs[0] += p1 * w2 - p2 * w1
         rhs[1] += p2 * w0 - p0 * w2
         rhs[2] += p0 * w1 - p1 * w0
         rhs[3] += r1 * w2 - r2 * w1 + p1 * u2 - p2 * u1
         rhs[4] += r2 * w0 - r0 * w2 + p2 * u0 - p0 * u2
         rhs[5] += r0 * w1 - r1 * w0 + p0 * u1 - p1 * u0
-        rhs[6:] += 0.5 * (dm_xi @ xi)
-        rhs -= xi[6:] @ dm_xi
-        return np.linalg.solve(M, rhs)
+        for i in range(n):
+            k = 4 * i
+            rhs[6 + i] += 0.5 * (slopes[k] * quadratic[k] + slopes[k + 1] * quadratic[k + 1]
+                                 + slopes[k + 2] * quadratic[k + 2] + slopes[k + 3] * quadratic[k + 3])
+        _, solution, info = _cholesky_solve(M, rhs)
+        if info != 0:  # not positive definite (never for a physical parameter set): general solver
+            return np.linalg.solve(M, np.array(rhs)).tolist()
+        return solution.tolist()
 
     def forward_dynamics(self, state: StructureState, tau: np.ndarray) -> np.ndarray:
         """ν̇ for the generalized force τ = [f_p (F0), m_p (Fp), m_l] (thesis (2.86) solved), fpr_model layout."""
