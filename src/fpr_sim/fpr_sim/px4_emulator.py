@@ -1,7 +1,13 @@
 """One emulated PX4 autopilot per UAV, speaking MAVLink 2 over UDP on 127.0.0.1 as PX4 SITL does. ROS-free.
 
-Server side like PX4 SITL: it binds ``127.0.0.1:port`` (default 14540 + i − 1) and replies to the address the
-last valid datagram came from. Behaviour (spec px4_ros_facts.md §1.3-§1.5):
+UDP like PX4 SITL instance k = i − 1 (its MAVLink "onboard" link, the one MAVROS/MAVSDK use): it binds its own
+local port ``127.0.0.1:local_port`` (default 14580 + i − 1) and SENDS from the start (HEARTBEAT, telemetry) to the
+remote port ``127.0.0.1:remote_port`` (default 14540 + i − 1), where the offboard computer (fpr_px4_bridge, MAVROS,
+MAVSDK) listens; afterwards it replies to the address of whoever sent it the last valid frame. ``local_port`` 0
+binds an ephemeral port (tests); ``remote_port`` 0 sends nothing until someone talks first. The receive buffer is
+enlarged (``SO_RCVBUF`` 1 MiB, capped by net.core.rmem_max): a loopback UDP socket drops datagrams once its
+buffer is full, so :meth:`Px4Emulator.poll` must be called continuously (the simulation does, at 250 Hz).
+Behaviour (spec px4_ros_facts.md §1.3-§1.5):
 
 - HEARTBEAT as MAV_TYPE_QUADROTOR / MAV_AUTOPILOT_PX4, ``base_mode`` with CUSTOM_MODE_ENABLED (+ SAFETY_ARMED,
   + AUTO|GUIDED|STABILIZE in OFFBOARD/AUTO), ``custom_mode`` = PX4 main/sub mode (fpr_px4_bridge.px4_protocol);
@@ -55,7 +61,12 @@ from fpr_px4_bridge.px4_protocol import (
 from fpr_sim.scenario import Px4Config
 from fpr_sim.sensors import ImuSample
 
-__all__ = ["EmulatorCounters", "Px4Emulator", "Px4Setpoint"]
+__all__ = ["LOCAL_BASE_PORT", "REMOTE_BASE_PORT", "EmulatorCounters", "Px4Emulator", "Px4Setpoint"]
+
+#: PX4 SITL instance k binds 127.0.0.1:(14580 + k) and sends to 127.0.0.1:(14540 + k) (its onboard MAVLink link).
+LOCAL_BASE_PORT = 14580
+REMOTE_BASE_PORT = 14540
+_RECEIVE_BUFFER = 1 << 20  # [bytes] requested SO_RCVBUF
 
 MAV_RESULT_ACCEPTED = 0
 MAV_RESULT_TEMPORARILY_REJECTED = 1
@@ -92,8 +103,8 @@ class Px4Emulator:
     """PX4 of UAV ``uav_id`` (1-based = MAVLink system id); see the module doc. Call :meth:`poll` and
     :meth:`update` with the simulation time, :meth:`send_telemetry` / :meth:`send_status` when due."""
 
-    def __init__(self, uav_id: int, config: Px4Config, yaw_offset: float, port: int | None = None,
-                 host: str = "127.0.0.1") -> None:
+    def __init__(self, uav_id: int, config: Px4Config, yaw_offset: float, local_port: int | None = None,
+                 remote_port: int | None = None, host: str = "127.0.0.1") -> None:
         if host not in ("127.0.0.1", "localhost"):
             raise ValueError(f"MAVLink is loopback-only in this project (DESIGN.md §6), got host {host!r}")
         self.uav_id = int(uav_id)
@@ -103,12 +114,19 @@ class Px4Emulator:
         self._mavlink = mavlink
         self.mav = mavlink.MAVLink(None, srcSystem=self.uav_id, srcComponent=1)
         self.mav.robust_parsing = True
-        self.port = 14540 + self.uav_id - 1 if port is None else int(port)
+        local_port = LOCAL_BASE_PORT + self.uav_id - 1 if local_port is None else int(local_port)
+        remote_port = REMOTE_BASE_PORT + self.uav_id - 1 if remote_port is None else int(remote_port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RECEIVE_BUFFER)
+        except OSError:
+            pass  # keep the default buffer
         self.sock.setblocking(False)
-        self.sock.bind(("127.0.0.1", self.port))
-        self.port = self.sock.getsockname()[1]
-        self.peer: tuple[str, int] | None = None
+        self.sock.bind(("127.0.0.1", local_port))
+        self.port: int = self.sock.getsockname()[1]  #: the local (bound) UDP port
+        self.receive_buffer: int = self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)  #: effective [bytes]
+        #: where frames go: the remote port at first, then the sender of the last valid frame (None: nowhere yet)
+        self.peer: tuple[str, int] | None = ("127.0.0.1", remote_port) if remote_port > 0 else None
         self.counters = EmulatorCounters()
         self.armed = False
         self.main_mode = Px4MainMode.POSCTL

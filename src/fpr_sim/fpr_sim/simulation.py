@@ -5,9 +5,17 @@ PX4 controller rate (250 Hz) and feed the attitude controllers; telemetry goes o
 status at ``status_rate`` (simulation time).
 
 Lockstep: at every control-period boundary (``control_rate``, 50 Hz) the simulation does not advance until every
-ARMED UAV's emulator has received a new setpoint since the previous boundary, or ``lockstep_timeout`` wall
-seconds passed (then :attr:`Simulation.lockstep_timeouts` is incremented). Results then do not depend on the
-machine's speed. ``lockstep = False`` never waits.
+UAV whose setpoint stream is live has received a new setpoint since the previous boundary, or ``lockstep_timeout``
+wall seconds passed (then :attr:`Simulation.lockstep_timeouts` is incremented). Results then do not depend on the
+machine's speed. A stream is live when a setpoint arrived during the previous control period, armed or not (so
+the stream that must precede arming and OFFBOARD is seen at its true rate in simulation time, however fast the
+simulation could run), or while an armed OFFBOARD UAV has not received any setpoint yet (a scenario that starts
+hovering waits for its controllers). A stream that stops costs one timeout, then the simulation runs on (PX4's
+offboard-loss failsafe plays out in simulation time). ``lockstep = False`` never waits.
+
+MAVLink: one :class:`~fpr_sim.px4_emulator.Px4Emulator` per UAV, as PX4 SITL instance i − 1: bound to
+127.0.0.1:(``local_base_port`` + i − 1), sending to 127.0.0.1:(``remote_base_port`` + i − 1) where the bridge
+listens (see :mod:`fpr_sim.px4_emulator`).
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fpr_sim.plant import GroundTruth, Plant
-from fpr_sim.px4_emulator import Px4Emulator
+from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator
 from fpr_sim.quadrotor import AttitudeCommand
 from fpr_sim.scenario import Scenario
 from fpr_sim.sensors import UavSensors
@@ -35,11 +43,14 @@ class SimulationOptions:
     control_rate: float = 50.0  #: [Hz] controllers' period used by the lockstep
     lockstep: bool = True
     lockstep_timeout: float = 0.5  #: [s] wall-clock wait per control period before giving up
-    base_port: int = 14540  #: UAV i listens on base_port + i − 1 (0: ephemeral ports, tests)
+    local_base_port: int = LOCAL_BASE_PORT  #: UAV i's emulator binds local_base_port + i − 1 (0: ephemeral, tests)
+    remote_base_port: int = REMOTE_BASE_PORT  #: ... and sends to remote_base_port + i − 1 (0: only once contacted)
+    remote_ports: tuple[int, ...] = ()  #: explicit remote port per UAV (tests); overrides remote_base_port
 
 
 class Simulation:
-    """See the module doc. ``ports`` (after construction) lists each emulator's UDP port."""
+    """See the module doc. ``ports`` lists each emulator's bound (local) UDP port, ``remote_ports`` where it sends
+    first (0: nowhere until contacted)."""
 
     def __init__(self, scenario: Scenario, options: SimulationOptions | None = None) -> None:
         self.scenario = scenario
@@ -49,15 +60,22 @@ class Simulation:
         self.n = n
         truth = self.plant.ground_truth()
         self.sensors = UavSensors(scenario, truth.uav_positions)
-        base = self.options.base_port
+        options = self.options
+        if options.remote_ports and len(options.remote_ports) != n:
+            raise ValueError(f"remote_ports: expected {n} ports, got {list(options.remote_ports)}")
+        local_base, remote_base = options.local_base_port, options.remote_base_port
+        self.remote_ports = [int(options.remote_ports[i]) if options.remote_ports else
+                             ((remote_base + i) if remote_base else 0) for i in range(n)]
         self.emulators = [Px4Emulator(i + 1, scenario.px4, self.sensors.yaw_offsets[i],
-                                      port=(base + i) if base else 0) for i in range(n)]
+                                      local_port=(local_base + i) if local_base else 0,
+                                      remote_port=self.remote_ports[i]) for i in range(n)]
         self.ports = [e.port for e in self.emulators]
         self._steps_per_control = max(1, int(round(self.options.physics_rate / self.options.control_rate)))
         self._steps_per_px4 = max(1, int(round(self.options.physics_rate / scenario.px4.controller_rate)))
         self._steps_per_telemetry = max(1, int(round(self.options.physics_rate / scenario.px4.telemetry_rate)))
         self._steps_per_status = max(1, int(round(self.options.physics_rate / scenario.px4.status_rate)))
         self._boundary_counts = [0] * n
+        self._stream_live = [False] * n  # a setpoint arrived during the previous control period
         self.lockstep_timeouts = 0
         self.lockstep_waits = 0
         self._truth = truth
@@ -125,13 +143,19 @@ class Simulation:
                 emulator.send_status(float(truth.battery_voltages[i]), float(truth.battery_remaining[i]),
                                      float(battery.current[i]))
 
+    def _expects_setpoint(self, i: int) -> bool:
+        """Lockstep waits for UAV i: its stream is live, or it is armed in OFFBOARD and never got a setpoint."""
+        emulator = self.emulators[i]
+        return self._stream_live[i] or (emulator.armed and emulator.offboard and emulator.counters.setpoints == 0)
+
     def _wait_for_setpoints(self) -> None:
-        """Lockstep: block until each armed emulator got a setpoint since the last boundary (or timeout)."""
+        """Lockstep: block until each expected emulator got a setpoint since the last boundary (or timeout)."""
         deadline = time.monotonic() + self.options.lockstep_timeout
         t = self.plant.time
+        expected = [i for i in range(self.n) if self._expects_setpoint(i)]
         while True:
-            missing = [e for i, e in enumerate(self.emulators)
-                       if e.armed and e.counters.setpoints <= self._boundary_counts[i]]
+            missing = [self.emulators[i] for i in expected
+                       if self.emulators[i].counters.setpoints <= self._boundary_counts[i]]
             if not missing:
                 break
             remaining = deadline - time.monotonic()
@@ -142,7 +166,9 @@ class Simulation:
             readable, _, _ = select.select(missing, [], [], min(remaining, 0.05))
             for emulator in readable:
                 emulator.poll(t)
-        self._boundary_counts = [e.counters.setpoints for e in self.emulators]
+        counts = [e.counters.setpoints for e in self.emulators]
+        self._stream_live = [c > b for c, b in zip(counts, self._boundary_counts, strict=True)]
+        self._boundary_counts = counts
 
     def step(self) -> None:
         """One physics step with the PX4, telemetry and lockstep schedules."""

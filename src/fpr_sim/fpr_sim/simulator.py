@@ -48,7 +48,11 @@ class SimulatorNode(Node):
         p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
         p("clock_rate", 250.0, descriptor=_desc("/clock publishing rate [Hz], at most 250"))
         p("ground_truth_rate", 100.0, descriptor=_desc("/fpr/ground_truth rate [Hz]"))
-        p("base_port", 14540, descriptor=_desc("UAV i's PX4 emulator listens on 127.0.0.1:base_port+i-1"))
+        p("local_base_port", 14580, descriptor=_desc(
+            "UAV i's PX4 emulator binds 127.0.0.1:local_base_port+i-1, as PX4 SITL instance i-1 (0: ephemeral)"))
+        p("remote_base_port", 14540, descriptor=_desc(
+            "UAV i's PX4 emulator sends HEARTBEAT/telemetry to 127.0.0.1:remote_base_port+i-1 (where px4_bridge "
+            "listens), then replies to whoever talks to it; 0: silent until contacted"))
         p("emulated_cameras", False, descriptor=_desc("publish noisy marker poses instead of images"))
         p("duration", 0.0, descriptor=_desc("stop after this simulated time [s]; 0 = run until shutdown"))
         get = self.get_parameter
@@ -57,7 +61,8 @@ class SimulatorNode(Node):
                                     control_rate=float(get("control_rate").value),
                                     lockstep=bool(get("lockstep").value),
                                     lockstep_timeout=float(get("lockstep_timeout").value),
-                                    base_port=int(get("base_port").value))
+                                    local_base_port=int(get("local_base_port").value),
+                                    remote_base_port=int(get("remote_base_port").value))
         self.sim = Simulation(self.scenario, options)
         self.real_time_factor = max(0.0, float(get("real_time_factor").value))
         self.clock_period = 1.0 / min(250.0, max(1.0, float(get("clock_rate").value)))
@@ -83,7 +88,8 @@ class SimulatorNode(Node):
         self._next_camera = 0.0
         self._last_timeouts = 0
         self.get_logger().info(
-            f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 ports {self.sim.ports}, "
+            f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
+            f"sending to {self.sim.remote_ports}, "
             f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep}")
 
     # ------------------------------------------------------------------------------------------------

@@ -1,6 +1,9 @@
-"""PX4 emulator driven by a plain pymavlink client over UDP on 127.0.0.1 (ephemeral ports)."""
+"""PX4 emulator driven by a plain pymavlink client over UDP on 127.0.0.1. As with PX4 SITL, the emulator talks
+first: it binds its own port and sends to the client's listening port; the client answers whoever it heard."""
 
 import os
+import socket
+import time
 
 import numpy as np
 import pytest
@@ -8,7 +11,8 @@ import pytest
 os.environ["MAVLINK20"] = "1"
 from fpr_model.frames import quat_enu_flu_to_ned_frd  # noqa: E402
 from fpr_model.rotations import quat_error, quat_from_axis_angle, quat_multiply  # noqa: E402
-from fpr_sim.scenario import scenario_from_dict  # noqa: E402
+from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator  # noqa: E402
+from fpr_sim.scenario import Px4Config, scenario_from_dict  # noqa: E402
 from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
@@ -16,18 +20,35 @@ ARM, SET_MODE = 400, 176
 OFFBOARD = 6
 
 
+def _listening_client():
+    """A client listening like MAVROS / MAVSDK / fpr_px4_bridge (on an ephemeral port here): pymavlink's udpin
+    can only send once it heard the autopilot (it replies to the last sender)."""
+    return mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=255, source_component=190)
+
+
+def _simulation(scenario, client):
+    """UAV 1's emulator sends to the client's port; UAVs 2 and 3 stay silent until contacted."""
+    port = client.port.getsockname()[1]
+    return Simulation(scenario, SimulationOptions(local_base_port=0, remote_ports=(port, 0, 0), lockstep=False))
+
+
+def _connect(client, sim):
+    """Advance the simulation until the client heard the emulator's HEARTBEAT, then answer with ours."""
+    for _ in range(100):
+        sim.advance(0.05)
+        if client.recv_match(type="HEARTBEAT", blocking=True, timeout=0.05) is not None:
+            client.mav.heartbeat_send(type=18, autopilot=8, base_mode=0, custom_mode=0, system_status=4)
+            return client
+    raise AssertionError("no HEARTBEAT from the emulator")
+
+
 @pytest.fixture
-def ground_sim():
-    sim = Simulation(scenario_from_dict({"initial_state": {"mode": "ground"}}),
-                     SimulationOptions(base_port=0, lockstep=False))
-    yield sim
+def ground():
+    client = _listening_client()
+    sim = _simulation(scenario_from_dict({"initial_state": {"mode": "ground"}}), client)
+    yield sim, client
     sim.close()
-
-
-def _client(port):
-    client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190)
-    client.mav.heartbeat_send(type=18, autopilot=8, base_mode=0, custom_mode=0, system_status=4)
-    return client
+    client.close()
 
 
 def _command(client, command, p1=0.0, p2=0.0, p3=0.0):
@@ -56,9 +77,50 @@ def _setpoint(client, q_enu_flu=(1.0, 0.0, 0.0, 0.0), thrust=0.3, mask=7, q_raw=
                                         body_roll_rate=0.0, body_pitch_rate=0.0, body_yaw_rate=0.0, thrust=thrust)
 
 
-def test_heartbeat_is_mavlink2_px4_quadrotor(ground_sim):
-    client = _client(ground_sim.ports[0])
-    ground_sim.advance(0.6)
+def _udp_socket(port=0):
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", port))
+    sock.settimeout(2.0)
+    return sock
+
+
+def test_default_ports_are_px4_sitl_ones_and_the_emulator_talks_first():
+    """PX4 SITL instance k: binds 14580 + k, sends to 14540 + k; then replies to whoever sent valid frames.
+    (Fixed ports are safe here: the tests run in a private network namespace, scripts/run_tests.sh.)"""
+    assert (LOCAL_BASE_PORT, REMOTE_BASE_PORT) == (14580, 14540)
+    ground_station = _udp_socket(REMOTE_BASE_PORT + 1)  # where UAV 2's emulator sends by default
+    emulator = Px4Emulator(2, Px4Config(), 0.0)
+    try:
+        assert emulator.port == LOCAL_BASE_PORT + 1
+        assert emulator.receive_buffer > 212992  # enlarged beyond the usual kernel default (208 KiB)
+        emulator.send_status(12.0, 0.9, 1.0)
+        data, sender = ground_station.recvfrom(4096)
+        assert sender == ("127.0.0.1", LOCAL_BASE_PORT + 1)
+        mav = mavutil.mavlink.MAVLink(None)
+        heartbeat = mav.parse_char(data)
+        assert heartbeat.get_type() == "HEARTBEAT" and heartbeat.get_srcSystem() == 2
+        # another client talks to it: replies go there from now on, not to the remote port any more
+        other = _udp_socket()
+        other_mav = mavutil.mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        other.sendto(other_mav.heartbeat_encode(type=6, autopilot=8, base_mode=0, custom_mode=0,
+                                                system_status=4).pack(other_mav), ("127.0.0.1", emulator.port))
+        for _ in range(400):  # wait for the datagram (loopback: immediate in practice)
+            if emulator.poll(0.0):
+                break
+            time.sleep(0.005)
+        assert emulator.peer == other.getsockname()
+        emulator.send_status(12.0, 0.9, 1.0)
+        data, sender = other.recvfrom(4096)
+        assert sender[1] == emulator.port
+        other.close()
+    finally:
+        emulator.close()
+        ground_station.close()
+
+
+def test_heartbeat_is_mavlink2_px4_quadrotor(ground):
+    sim, client = ground
+    sim.advance(0.6)  # the emulator sends from the start, before anyone talked to it
     msg = client.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0)
     assert msg is not None
     assert msg.get_msgbuf()[0] == 0xFD  # MAVLink 2 frame
@@ -66,7 +128,7 @@ def test_heartbeat_is_mavlink2_px4_quadrotor(ground_sim):
     assert msg.type == mavutil.mavlink.MAV_TYPE_QUADROTOR
     assert msg.get_srcSystem() == 1
     assert msg.base_mode & 1 and not msg.base_mode & 128
-    ground_sim.advance(0.6)
+    sim.advance(0.6)
     seen = set()
     while (msg := client.recv_match(blocking=True, timeout=0.5)) is not None:
         seen.add(msg.get_type())
@@ -74,9 +136,10 @@ def test_heartbeat_is_mavlink2_px4_quadrotor(ground_sim):
             "BATTERY_STATUS", "HEARTBEAT"} <= seen
 
 
-def test_arming_and_offboard_need_a_setpoint_stream(ground_sim):
-    client = _client(ground_sim.ports[0])
-    ground_sim.advance(0.01)
+def test_arming_and_offboard_need_a_setpoint_stream(ground):
+    ground_sim, client = ground
+    _connect(client, ground_sim)
+    _drain(client)
     _command(client, ARM, 1.0)
     assert _ack(client, ground_sim, ARM) != 0
     _command(client, SET_MODE, 1.0, OFFBOARD)
@@ -106,8 +169,9 @@ def test_arming_and_offboard_need_a_setpoint_stream(ground_sim):
     assert heartbeat.custom_mode == 393216 and heartbeat.base_mode & 128
 
 
-def test_failsafe_after_one_second_of_silence_then_land(ground_sim):
-    client = _client(ground_sim.ports[0])
+def test_failsafe_after_one_second_of_silence_then_land(ground):
+    ground_sim, client = ground
+    _connect(client, ground_sim)
     for _ in range(30):
         _setpoint(client, thrust=0.05)
         ground_sim.advance(0.05)
@@ -128,8 +192,9 @@ def test_failsafe_after_one_second_of_silence_then_land(ground_sim):
     assert not emulator.armed  # landed (it never left the ground) -> disarmed
 
 
-def test_bad_input_is_ignored_and_counted(ground_sim):
-    client = _client(ground_sim.ports[0])
+def test_bad_input_is_ignored_and_counted(ground):
+    ground_sim, client = ground
+    _connect(client, ground_sim)
     emulator = ground_sim.emulators[0]
     ground_sim.advance(0.01)
     _setpoint(client, q_enu_flu=(1.0, 0.0, 0.0, 0.0), thrust=0.4)
@@ -158,11 +223,14 @@ def test_attitude_step_response_matches_the_p_gain_time_constant():
     scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
                                    "ground": {"enabled": False}, "plant": {"joint_offset": 0.0},
                                    "px4": {"yaw_offsets": [0.4]}})
-    sim = Simulation(scenario, SimulationOptions(base_port=0, lockstep=False))
+    client = _listening_client()
+    sim = _simulation(scenario, client)
     try:
-        client = _client(sim.ports[0])
         emulator = sim.emulators[0]
         hover_local, thrust = emulator.quat_local.copy(), emulator.thrust
+        # the emulator's first telemetry reaches the client within the first 20 ms (hover: armed from t = 0)
+        sim.advance(0.02)
+        assert client.recv_match(blocking=True, timeout=2.0) is not None
         for _ in range(10):
             _setpoint(client, hover_local, thrust)
             sim.advance(0.02)
@@ -188,3 +256,4 @@ def test_attitude_step_response_matches_the_p_gain_time_constant():
         assert errors[-1] < 0.1 * initial
     finally:
         sim.close()
+        client.close()

@@ -26,7 +26,7 @@ def test_simulator_node_publishes_clock_truth_and_images():
         listener.create_subscription(FprState, "/fpr/ground_truth", truths.append, 500)
         listener.create_subscription(Image, "/fpr/uav2/camera/image_raw", images.append, qos_profile_sensor_data)
         overrides = [Parameter("real_time_factor", value=1.0), Parameter("duration", value=1.0),
-                     Parameter("base_port", value=0)]
+                     Parameter("local_base_port", value=0), Parameter("remote_base_port", value=0)]
         sim_node = SimulatorNode(parameter_overrides=overrides)
         executor = SingleThreadedExecutor()
         executor.add_node(listener)

@@ -1,0 +1,435 @@
+"""Integration: fpr_px4_bridge (the real bridge core, and the real px4_bridge node) against fpr_sim's PX4 emulators
+driven by the simulation core in lockstep, over MAVLink 2 / UDP on 127.0.0.1.
+
+ROS-free part: one :class:`Px4Bridge` per UAV, listening like on the robot; the emulators talk first (PX4 SITL
+convention); one loop alternates a 20 ms control period of simulation with the bridges' receive / submit / tick at
+the simulation time, so it is deterministic and as fast as the physics. The flight is run once (module fixture)
+and each test checks one aspect of its record: connection, arming and OFFBOARD through the bridge's state machine,
+setpoint frames and thrust normalization end-to-end, telemetry frames, setpoint-stream loss -> PX4 failsafe.
+
+ROS part: the px4_bridge node in-process with its DEFAULT port (udp://127.0.0.1:14540) against a simulation with
+the DEFAULT emulator ports (bind 14580 + i - 1, send to 14540 + i - 1), teleop ARM then FLY on /fpr/teleop,
+setpoints on /fpr/uav1/setpoint, status / imu / velocity_body read back. (Fixed ports are safe: the tests run in a
+private network namespace, scripts/run_tests.sh.)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+os.environ["MAVLINK20"] = "1"
+from fpr_model.battery import max_thrust, thrust_coefficients  # noqa: E402
+from fpr_model.dynamics import gravity, thrusts_from_wrench  # noqa: E402
+from fpr_model.rotations import quat_error, quat_from_axis_angle, quat_multiply, quat_to_rotmat  # noqa: E402
+from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge  # noqa: E402
+from fpr_px4_bridge.link import MavlinkLink  # noqa: E402
+from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, TeleopMode  # noqa: E402
+from fpr_px4_bridge.px4_protocol import Px4AutoSubMode, Px4MainMode  # noqa: E402
+from fpr_px4_bridge.telemetry import BodyVelocitySample, ImuSample  # noqa: E402
+from fpr_sim.scenario import scenario_from_dict  # noqa: E402
+from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
+
+CONTROL_PERIOD = 0.02  # [s] the bridge's stream period (50 Hz) and the simulation's lockstep period
+YAW_OFFSETS = [0.3, -0.5, 1.2]  # F0i yaw offsets of the three PX4s [rad]
+THRUST_RATIO = 1.1  # 1.1x the hover thrusts: the robot accelerates upwards at ~g/10, legs near equilibrium
+
+
+def _angle(q, q_ref) -> float:
+    """Rotation angle between two attitudes [rad]."""
+    return 2.0 * math.asin(min(1.0, float(np.linalg.norm(quat_error(q, q_ref)[1:]))))
+
+
+def _level_with_yaw(q) -> np.ndarray:
+    """The level attitude with the yaw of ``q`` (ENU/FLU)."""
+    w, x, y, z = q
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return quat_from_axis_angle([0.0, 0.0, 1.0], yaw)
+
+
+def _tilt(q) -> float:
+    """Angle between the body z axis and the world z axis [rad]."""
+    return math.acos(max(-1.0, min(1.0, float(quat_to_rotmat(q)[2, 2]))))
+
+
+def _scenario(mode: str):
+    """``ground``: resting on the ground, disarmed; ``hover``: hovering (legs 60°), PX4s armed in OFFBOARD."""
+    initial = {"mode": mode} if mode == "ground" else {"mode": "hover", "armed": True, "leg_angles": math.radians(60)}
+    return scenario_from_dict({"initial_state": initial, "ground": {"enabled": mode == "ground"},
+                               "px4": {"yaw_offsets": YAW_OFFSETS}, "cameras": {"enabled": False}})
+
+
+# ------------------------------------------------------------------------------------------------ ROS-free rig
+class Rig:
+    """Three bridge cores + the simulation core, stepped together (see the module doc)."""
+
+    def __init__(self, scenario) -> None:
+        self.links = [MavlinkLink("udp://127.0.0.1:0", system_id=i, target_system=i) for i in (1, 2, 3)]
+        offboard = OffboardConfig(command_max_attempts=20)
+        self.bridges = [Px4Bridge(BridgeConfig(uav_id=i, target_system=i, a_f=thrust_coefficients(i).a_f,
+                                               b_f=thrust_coefficients(i).b_f, offboard=offboard), link)
+                        for i, link in zip((1, 2, 3), self.links, strict=True)]
+        ports = tuple(link.local_address[1] for link in self.links)
+        self.sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_ports=ports, lockstep=True,
+                                                          lockstep_timeout=0.3))
+        self.imu: list[ImuSample | None] = [None] * 3
+        self.velocity: list[BodyVelocitySample | None] = [None] * 3
+        self.setpoints: list[tuple[np.ndarray, float]] | None = None  # (q local ENU/FLU, thrust N) per UAV
+
+    def close(self) -> None:
+        self.sim.close()
+        for link in self.links:
+            link.close()
+
+    @property
+    def now(self) -> float:
+        return self.sim.time
+
+    def teleop(self, mode: TeleopMode) -> None:
+        for bridge in self.bridges:
+            bridge.on_teleop(int(mode), self.now)
+
+    def cycle(self) -> None:
+        """One control period: simulation (lockstep), then each bridge reads, gets its setpoint, ticks."""
+        self.sim.advance(CONTROL_PERIOD)
+        now = self.now
+        for i, bridge in enumerate(self.bridges):
+            for sample in bridge.poll(now):
+                if isinstance(sample, ImuSample):
+                    self.imu[i] = sample
+                elif isinstance(sample, BodyVelocitySample):
+                    self.velocity[i] = sample
+            if self.setpoints is not None:
+                q, thrust = self.setpoints[i]
+                result = bridge.submit_setpoint(q, thrust, i + 1, now)
+                assert result.accepted, result.reason
+            bridge.tick(now)
+
+    def run_until(self, condition, timeout: float, what: str) -> float:
+        """Cycle until ``condition()`` holds (at most ``timeout`` s of simulation); return the simulation time."""
+        deadline = self.now + timeout
+        while not condition():
+            assert self.now < deadline, f"{what}: not reached within {timeout} s of simulation"
+            self.cycle()
+        return self.now
+
+    def status(self, i: int):
+        return self.bridges[i].status(self.now)
+
+
+def _hover_forces(plant) -> np.ndarray:
+    """J^-T g: the thrust vectors holding the structure (plant's true parameters), world frame [N], (n, 3)."""
+    q = plant.state.configuration()
+    return thrusts_from_wrench(plant.params, q, gravity(plant.params, q))
+
+
+@pytest.fixture(scope="module")
+def ground_start():
+    """Robot resting on the ground, disarmed: connect, teleop ARM, then FLY (idle thrust, present attitudes)."""
+    rig = Rig(_scenario("ground"))
+    record: dict = {"failure": ""}
+    try:
+        sim, bridges, emulators = rig.sim, rig.bridges, rig.sim.emulators
+        record["connected_at"] = rig.run_until(lambda: all(rig.status(i).connected for i in range(3)), 2.0,
+                                               "connected")
+        rig.run_until(lambda: all(s is not None for s in rig.imu), 1.0, "first telemetry")
+        record["initial_status"] = [rig.status(i) for i in range(3)]
+        # the controller's setpoint: each UAV's present attitude in ITS frame, 0 N (-> thrust_min): stays put
+        rig.setpoints = [(rig.imu[i].orientation.copy(), 0.0) for i in range(3)]
+        rig.teleop(TeleopMode.ARM)
+        rig.cycle()  # the first setpoint and the first ARM go out at the end of this period
+        record["stream_started_at"] = rig.now
+        record["armed_at"] = rig.run_until(lambda: all(e.armed for e in emulators), 3.0, "armed")
+        record["armed_seen_after"] = rig.run_until(  # the bridges see it in the next HEARTBEAT (2 Hz)
+            lambda: all(rig.status(i).armed for i in range(3)), 0.6, "armed HEARTBEAT") - record["armed_at"]
+        record["armed_status"] = [rig.status(i) for i in range(3)]
+        rig.teleop(TeleopMode.FLY)
+        record["offboard_at"] = rig.run_until(
+            lambda: all(b.machine.state == BridgeState.OFFBOARD for b in bridges)
+            and all(e.offboard for e in emulators), 4.0, "OFFBOARD")
+        record["offboard_requested_at"] = [b.machine.offboard_requested_at for b in bridges]
+        record["offboard_status"] = [rig.status(i) for i in range(3)]
+        record["emulator_thrust"] = [e.thrust for e in emulators]
+        record["voltages"] = [b.battery_voltage(rig.now) for b in bridges]
+        record["lockstep_timeouts"] = sim.lockstep_timeouts
+    except AssertionError as error:
+        record["failure"] = str(error)
+    finally:
+        rig.close()
+    return record
+
+
+@pytest.fixture(scope="module")
+def hover_flight():
+    """Robot hovering, PX4s armed in OFFBOARD (scenario start); the bridges fly it open loop: UAV 1 LEVEL, UAVs 2
+    and 3 at their hover attitudes, all with 1.1x their hover thrust (the robot accelerates upwards at ~g/10 with
+    its legs near equilibrium); after 1 s the controller goes silent (setpoint stream loss)."""
+    rig = Rig(_scenario("hover"))
+    record: dict = {"failure": ""}
+    try:
+        sim, bridges, emulators = rig.sim, rig.bridges, rig.sim.emulators
+        plant = sim.plant
+        forces = _hover_forces(plant)
+        quats = plant.default_uav_attitudes(forces)
+        setpoints = [(sim.sensors.world_to_local_quat(i, quats[i]), THRUST_RATIO * float(np.linalg.norm(forces[i])))
+                     for i in range(3)]
+        setpoints[0] = (_level_with_yaw(setpoints[0][0]), setpoints[0][1])
+        rig.setpoints = setpoints
+        rig.teleop(TeleopMode.FLY)  # PX4 is already armed: the bridges stream, then see OFFBOARD
+        rig.run_until(lambda: rig.now >= 0.9 - 1e-9, 1.5, "0.9 s of flight")  # between two BATTERY_STATUS
+        truth = sim.ground_truth()
+        record["hover"] = {
+            "setpoints": setpoints, "states": [b.machine.state for b in bridges],
+            "emulator_quat_local": [e.quat_local.copy() for e in emulators],
+            "emulator_thrust": [e.thrust for e in emulators],
+            "bridge_voltages": [b.battery_voltage(rig.now) for b in bridges],
+            "plant_thrust": plant.fleet.thrust().copy(), "plant_max_thrust": plant.fleet.max_thrust().copy(),
+            "true_quats": truth.uav_quats.copy(), "true_rates": truth.uav_rates.copy(),
+            "true_velocities": truth.uav_velocities.copy(),
+            "true_local_quats": [sim.sensors.world_to_local_quat(i, truth.uav_quats[i]) for i in range(3)],
+            "imu": list(rig.imu), "velocity": list(rig.velocity), "time": rig.now,
+            "gyro_bias": sim.sensors.gyro_bias.copy(),
+        }
+        record["lockstep_timeouts_streaming"] = sim.lockstep_timeouts
+        # setpoint stream loss: the bridges repeat the last setpoint for setpoint_timeout, then stop; PX4's
+        # COM_OF_LOSS_T (1 s) failsafe then takes over (AUTO.LOITER: level attitude, last thrust)
+        rig.setpoints = None
+        record["stop_at"] = stop_at = rig.now
+        sent = [b.setpoints_sent for b in bridges]
+        last_sent = [rig.now] * 3
+        failsafe_at: list[float | None] = [None] * 3
+        failsafe_command: list = [None] * 3
+        thrust_before = [e.thrust for e in emulators]
+        record["bridge_failsafe_at"] = None
+
+        def watch() -> bool:
+            for i, (bridge, emulator) in enumerate(zip(bridges, emulators, strict=True)):
+                if bridge.setpoints_sent != sent[i]:
+                    sent[i], last_sent[i] = bridge.setpoints_sent, rig.now
+                if failsafe_at[i] is None and emulator.counters.failsafes:
+                    failsafe_at[i] = rig.now
+                    failsafe_command[i] = (plant.command.quat[i].copy(), float(plant.command.thrust[i]))
+            if record["bridge_failsafe_at"] is None and all(b.machine.state == BridgeState.FAILSAFE
+                                                            for b in bridges):
+                record["bridge_failsafe_at"] = rig.now
+            return all(t is not None for t in failsafe_at) and rig.now >= max(failsafe_at) + 0.6
+
+        rig.run_until(watch, 2.5, "PX4 failsafe")
+        record["stream_stopped_after"] = [t - stop_at for t in last_sent]
+        record["last_setpoint_sent_at"] = last_sent
+        record["px4_failsafe_at"] = failsafe_at
+        record["failsafe_command"] = failsafe_command
+        record["thrust_before_loss"] = thrust_before
+        record["failsafe_status"] = [rig.status(i) for i in range(3)]
+        record["lockstep_timeouts_after_loss"] = sim.lockstep_timeouts
+    except AssertionError as error:
+        record["failure"] = str(error)
+    finally:
+        rig.close()
+    return record
+
+
+def _get(record: dict, key: str):
+    assert key in record, f"phase not reached: {record['failure']}"
+    return record[key]
+
+
+def test_heartbeat_connects_every_bridge(ground_start):
+    connected_at = _get(ground_start, "connected_at")
+    assert connected_at <= 0.6  # first HEARTBEAT at 0.5 s (2 Hz), sent unprompted to the bridge's port
+    for status in _get(ground_start, "initial_status"):
+        assert status.connected and status.state == BridgeState.IDLE and not status.armed
+        assert status.mode_name == "POSCTL" and status.battery_voltage == pytest.approx(12.4, abs=0.05)
+
+
+def test_arming_and_offboard_through_the_state_machine(ground_start):
+    stream_start, armed_at = _get(ground_start, "stream_started_at"), _get(ground_start, "armed_at")
+    assert 1.0 <= armed_at - stream_start <= 1.7  # PX4 refuses ARM before 1 s of stream; the bridge retried
+    for status in ground_start["armed_status"]:
+        assert status.armed and status.state == BridgeState.WARMUP and not status.offboard
+    requested = _get(ground_start, "offboard_requested_at")
+    for t in requested:
+        assert t is not None and t - stream_start >= OffboardConfig().offboard_warmup - 1e-9  # >= 1.2 s of stream
+    assert ground_start["offboard_at"] - max(requested) <= 0.6  # the next HEARTBEAT (2 Hz) confirms it
+    for status in ground_start["offboard_status"]:
+        assert status.state == BridgeState.OFFBOARD and status.offboard and status.armed and not status.failsafe
+        assert status.mode_name == "OFFBOARD" and status.px4_custom_mode == 6 << 16
+        assert status.setpoint_rate >= 50.0
+    # 0 N is clamped to thrust_min by the bridge, never sent as 0 (PX4 would see "no thrust")
+    assert ground_start["emulator_thrust"] == pytest.approx([BridgeConfig().thrust_min] * 3, rel=1e-6)
+    assert ground_start["lockstep_timeouts"] == 0
+
+
+def test_setpoints_reach_px4_in_ned_frd_and_fly_with_the_battery_normalized_thrust(hover_flight):
+    hover = _get(hover_flight, "hover")
+    assert hover["states"] == [BridgeState.OFFBOARD] * 3
+    assert hover_flight["lockstep_timeouts_streaming"] == 0  # the lockstep never waited in vain on the bridges
+    for i in range(3):
+        q_local, thrust_newton = hover["setpoints"][i]
+        q_world = quat_multiply(quat_from_axis_angle([0.0, 0.0, 1.0], YAW_OFFSETS[i]), q_local)
+        print(f"UAV {i + 1}: attitude error {math.degrees(_angle(hover['true_quats'][i], q_world)):.3f} deg, "
+              f"tilt {math.degrees(_tilt(hover['true_quats'][i])):.3f} deg, thrust {hover['plant_thrust'][i]:.3f} N "
+              f"for {thrust_newton:.3f} N, normalized {hover['emulator_thrust'][i]:.4f}")
+        # ENU/FLU -> NED/FRD in the bridge, NED/FRD -> ENU/FLU in the emulator: float32 on the wire
+        assert _angle(hover["emulator_quat_local"][i], q_local) < 1e-6
+        # the emulated PX4 flies it in its own frame F0i: in the world, yaw offset o local setpoint
+        assert math.degrees(_angle(hover["true_quats"][i], q_world)) < 2.5  # frame errors: >= 17 deg
+        # thrust: N -> normalized by (C.1)-(C.2) with Table C.1's a_f, b_f and PX4's reported voltage ...
+        coefficients = thrust_coefficients(i + 1)
+        voltage = hover["bridge_voltages"][i]
+        expected = thrust_newton / max_thrust(voltage, coefficients.a_f, coefficients.b_f)
+        assert 0.2 < expected < 0.8
+        assert hover["emulator_thrust"][i] == pytest.approx(expected, rel=1e-6)  # float32 on the wire
+        # ... and back to newtons by the plant's own battery and thrust curve (the same Table C.1 rows)
+        assert hover["plant_max_thrust"][i] == pytest.approx(
+            max_thrust(voltage, coefficients.a_f, coefficients.b_f), rel=0.01)
+        assert hover["plant_thrust"][i] == pytest.approx(thrust_newton, rel=0.02)
+    assert math.degrees(_tilt(hover["true_quats"][0])) < 1.5  # the level setpoint flies level (3.2 deg before)
+
+
+def test_telemetry_is_in_each_uav_local_enu_frame_and_flu_body(hover_flight):
+    hover = _get(hover_flight, "hover")
+    for i in range(3):
+        imu, velocity = hover["imu"][i], hover["velocity"][i]
+        assert imu.stamp == pytest.approx(hover["time"], abs=0.03)
+        # orientation in F0i (its yaw offset included), not in the world frame: attitude noise 0.002 rad/axis
+        assert _angle(imu.orientation, hover["true_local_quats"][i]) < 0.01
+        assert _angle(imu.orientation, hover["true_quats"][i]) > abs(YAW_OFFSETS[i]) - 0.05
+        # FLU body rates: truth + the UAV's constant gyro bias, noise 0.003 rad/s
+        assert np.allclose(imu.angular_velocity, hover["true_rates"][i] + hover["gyro_bias"][i], atol=0.015)
+        # FLU body velocity: R^T v_world of the truth; velocity noise 0.02 m/s per axis
+        v_body = quat_to_rotmat(hover["true_quats"][i]).T @ hover["true_velocities"][i]
+        assert np.allclose(velocity.linear, v_body, atol=0.08)
+        assert v_body[2] > 0.3 and velocity.linear[2] > 0.2  # climbing, body z up (FLU, not FRD)
+
+
+def test_setpoint_stream_loss_stops_the_bridge_and_triggers_the_px4_failsafe(hover_flight):
+    failsafe_at = _get(hover_flight, "px4_failsafe_at")
+    setpoint_timeout = BridgeConfig().setpoint_timeout
+    for stopped_after, last_sent, t_failsafe in zip(hover_flight["stream_stopped_after"],
+                                                    hover_flight["last_setpoint_sent_at"], failsafe_at, strict=True):
+        # the bridge repeats the last setpoint for setpoint_timeout, then stops (within one period)
+        assert setpoint_timeout - CONTROL_PERIOD <= stopped_after <= setpoint_timeout + CONTROL_PERIOD + 1e-9
+        # PX4: COM_OF_LOSS_T = 1 s after the last setpoint (checked at 250 Hz, observed every 20 ms)
+        assert 1.0 <= t_failsafe - last_sent <= 1.0 + 2 * CONTROL_PERIOD + 1e-9
+    bridge_failsafe_at = hover_flight["bridge_failsafe_at"]
+    assert bridge_failsafe_at is not None
+    assert bridge_failsafe_at - hover_flight["stop_at"] <= setpoint_timeout + 2 * CONTROL_PERIOD
+    for status in hover_flight["failsafe_status"]:
+        assert status.failsafe and status.state == BridgeState.FAILSAFE and status.connected
+        assert status.mode_name == "AUTO.LOITER" and status.armed and not status.offboard
+        assert status.px4_custom_mode == (Px4MainMode.AUTO << 16 | Px4AutoSubMode.LOITER << 24)
+    for (quat, thrust), before in zip(hover_flight["failsafe_command"], hover_flight["thrust_before_loss"],
+                                      strict=True):
+        assert _tilt(quat) < 1e-6  # hold: level attitude with the present yaw (acos resolution) ...
+        assert thrust == pytest.approx(before, rel=0.01)  # ... and the last thrust (voltage-renormalized repeats)
+    # the lockstep waited once in vain for the stopped streams, then let PX4's failsafe play out
+    assert hover_flight["lockstep_timeouts_after_loss"] == 1
+
+
+# ------------------------------------------------------------------------------------------------ ROS node
+def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
+    rclpy = pytest.importorskip("rclpy")
+    from fpr_px4_bridge.px4_bridge_node import Px4BridgeNode
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from sensor_msgs.msg import Imu
+
+    from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus
+
+    sim = Simulation(_scenario("ground"), SimulationOptions(lockstep=True, lockstep_timeout=0.3))  # 14580+, to 14540+
+    rclpy.init()
+    executor = MultiThreadedExecutor(num_threads=2)
+    spinner = None
+    bridge = test_node = None
+    try:
+        assert sim.ports == [14580, 14581, 14582] and sim.remote_ports == [14540, 14541, 14542]
+        bridge = Px4BridgeNode(namespace="/fpr/uav1", parameter_overrides=[
+            Parameter("uav_id", value=1), Parameter("command_max_attempts", value=20)])  # default connection URL
+        assert bridge.link.local_address == ("127.0.0.1", 14540)
+        test_node = rclpy.create_node("bridge_emulator_test")
+        statuses, imus = [], []
+        test_node.create_subscription(UavStatus, "/fpr/uav1/status", statuses.append, 10)
+        test_node.create_subscription(Imu, "/fpr/uav1/imu", imus.append, qos_profile_sensor_data)
+        best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+        teleop_pub = test_node.create_publisher(TeleopCommand, "/fpr/teleop", best_effort)
+        setpoint_pub = test_node.create_publisher(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", best_effort)
+        command = {"mode": TeleopCommand.MODE_IDLE, "setpoint": None}
+
+        def publish() -> None:  # 50 Hz, wall clock: the controller's setpoint and the operator's mode
+            teleop = TeleopCommand()
+            teleop.mode = command["mode"]
+            teleop_pub.publish(teleop)
+            if command["setpoint"] is not None:
+                q, thrust = command["setpoint"]
+                msg = AttitudeThrustSetpoint()
+                msg.uav_id = 1
+                msg.attitude.w, msg.attitude.x, msg.attitude.y, msg.attitude.z = (float(v) for v in q)
+                msg.thrust = float(thrust)
+                setpoint_pub.publish(msg)
+
+        test_node.create_timer(CONTROL_PERIOD, publish)
+        executor.add_node(bridge)
+        executor.add_node(test_node)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        deadline = time.monotonic() + 10.0
+        while teleop_pub.get_subscription_count() == 0 or setpoint_pub.get_subscription_count() == 0 \
+                or not statuses:
+            assert time.monotonic() < deadline, "discovery timed out"
+            sim.advance(CONTROL_PERIOD)  # the emulator talks first; the bridge's status shows it
+            time.sleep(0.005)
+
+        def run_until(condition, sim_timeout: float, what: str) -> None:
+            sim_deadline, wall_deadline = sim.time + sim_timeout, time.monotonic() + 8.0 * sim_timeout + 5.0
+            while not condition():
+                assert sim.time < sim_deadline and time.monotonic() < wall_deadline, \
+                    f"{what}: not reached (last status {statuses[-1] if statuses else None})"
+                sim.advance(CONTROL_PERIOD)  # lockstep: paced by the bridge's stream once it runs
+                if not any(e.counters.setpoints for e in sim.emulators):
+                    time.sleep(0.002)  # no lockstep yet: leave the executor threads some of the GIL
+
+        run_until(lambda: statuses[-1].connected and imus, 3.0, "connected")
+        assert statuses[-1].state == UavStatus.STATE_IDLE and statuses[-1].mode_name == "POSCTL"
+        orientation = imus[-1].orientation
+        q_local = np.array([orientation.w, orientation.x, orientation.y, orientation.z])
+        q_local /= np.linalg.norm(q_local)
+        thrust_newton = 0.5 * float(np.linalg.norm(_hover_forces(sim.plant)[0]))  # stays on the ground
+        command["setpoint"] = (q_local, thrust_newton)  # the present attitude, in UAV 1's own frame
+        command["mode"] = TeleopCommand.MODE_ARM
+        emulator = sim.emulators[0]
+        run_until(lambda: emulator.armed, 6.0, "armed")
+        command["mode"] = TeleopCommand.MODE_FLY
+        run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD and statuses[-1].offboard, 8.0, "OFFBOARD")
+        assert emulator.offboard and statuses[-1].mode_name == "OFFBOARD" and statuses[-1].armed
+        assert _angle(emulator.quat_local, q_local) < 1e-6
+        voltage = statuses[-1].battery_voltage
+        coefficients = thrust_coefficients(1)
+        assert emulator.thrust == pytest.approx(
+            thrust_newton / max_thrust(voltage, coefficients.a_f, coefficients.b_f), rel=0.02)
+        orientation = imus[-1].orientation
+        q_imu = [orientation.w, orientation.x, orientation.y, orientation.z]
+        q_truth_local = sim.sensors.world_to_local_quat(0, sim.plant.fleet.quat[0])
+        # in UAV 1's local frame F0i (yaw offset 0.3 rad from the world); the message may be a few periods old
+        assert _angle(q_imu, q_truth_local) < 0.15 < _angle(q_imu, sim.plant.fleet.quat[0])
+        # the controller goes silent: the bridge stops streaming, PX4's offboard-loss failsafe takes over
+        command["setpoint"] = None
+        run_until(lambda: emulator.counters.failsafes >= 1, 3.0, "PX4 failsafe")
+        assert emulator.main_mode == Px4MainMode.AUTO
+        run_until(lambda: statuses[-1].failsafe and statuses[-1].mode_name == "AUTO.LOITER", 2.0, "status failsafe")
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        if spinner is not None:
+            spinner.join(timeout=2.0)
+        if bridge is not None:
+            bridge.destroy_node()
+        if test_node is not None:
+            test_node.destroy_node()
+        sim.close()
+        rclpy.try_shutdown()
