@@ -31,6 +31,10 @@ CORNER_REFINEMENT = {
 }
 
 
+#: Pixel-centre convention offset of the AprilTag corner refinement (see ArucoPoseDetector.detect) [px].
+APRILTAG_CORNER_OFFSET_PX = 0.5
+
+
 @dataclass(frozen=True)
 class ArucoConfig:
     """Detector configuration (YAML: config/aruco_detector.yaml)."""
@@ -145,8 +149,13 @@ class ArucoPoseDetector:
             return None
         # Several candidates with the same id: take the largest (closest / most accurate).
         corners = max((corners_list[k].reshape(4, 2) for k in matches),
-                      key=lambda c: cv2.contourArea(c.astype(np.float32)))
-        return self.estimate_pose(corners.astype(np.float64), camera)
+                      key=lambda c: cv2.contourArea(c.astype(np.float32))).astype(np.float64)
+        if self.config.corner_refinement == "apriltag":
+            # OpenCV's AprilTag refinement reports corners with pixel centres at (0.5, 0.5) instead of (0, 0)
+            # (AprilRobotics/apriltag#121): measured +0.43 px on both axes against projectPoints of the true
+            # corners on rendered images; shifting back halves the median position error (1.35 -> 0.6 mm).
+            corners -= APRILTAG_CORNER_OFFSET_PX
+        return self.estimate_pose(corners, camera)
 
     def estimate_pose(self, corners: np.ndarray, camera: CameraModel) -> MarkerObservation | None:
         """IPPE_SQUARE pose from 4 corners (TL, TR, BR, BL) with the ambiguity resolution of the module doc."""
