@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from fpr_model.calibration import CameraModel, make_transform
+from fpr_model.calibration import CameraModel, aruco_dictionary, make_transform
 
 __all__ = [
     "ArucoConfig", "ArucoPoseDetector", "MarkerObservation", "aruco_dictionary", "decode_image", "validate_mono_image",
@@ -94,14 +94,6 @@ def validate_mono_image(image) -> np.ndarray:
     if min(image.shape) < 8:
         raise ValueError(f"image too small: {image.shape}")
     return image
-
-
-def aruco_dictionary(name: str):
-    """OpenCV predefined dictionary by its cv2.aruco constant name, e.g. "DICT_ARUCO_MIP_36H12"."""
-    for key in (name, name.upper()):
-        if key.startswith("DICT_") and isinstance(getattr(cv2.aruco, key, None), int):
-            return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, key))
-    raise ValueError(f"unknown ArUco dictionary {name!r}")
 
 
 def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:

@@ -53,6 +53,7 @@ from fpr_model.rotations import euler_zxz_to_rotmat, rotmat_to_euler_zxz
 __all__ = [
     "TABLE_D1_CAMERA",
     "TABLE_D1_MARKER",
+    "aruco_dictionary",
     "CameraModel",
     "EulerZxzPose",
     "VisionCalibration",
@@ -295,3 +296,17 @@ def load_vision_calibration(source: str | Path | dict | None = None) -> VisionCa
         camera,
         float(data.get("marker_size", 0.109)),
     )
+
+
+def aruco_dictionary(name: str):
+    """OpenCV predefined ArUco dictionary by its cv2.aruco constant name, e.g. "DICT_ARUCO_MIP_36H12".
+
+    Shared by the marker detector (fpr_estimation) and the simulator's marker renderer (fpr_sim) so that both
+    always agree on the dictionary. Raises ValueError naming the dictionary when OpenCV does not know it.
+    """
+    import cv2  # local: fpr_model does not otherwise need OpenCV
+
+    for key in (name, name.upper()):
+        if key.startswith("DICT_") and isinstance(getattr(cv2.aruco, key, None), int):
+            return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, key))
+    raise ValueError(f"unknown ArUco dictionary {name!r}")

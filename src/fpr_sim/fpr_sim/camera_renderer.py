@@ -21,18 +21,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from fpr_model.calibration import CameraModel, invert_transform, make_transform
+from fpr_model.calibration import CameraModel, aruco_dictionary, invert_transform, make_transform
 from fpr_model.rotations import quat_from_rotvec, quat_to_rotmat
 
 __all__ = ["MarkerRenderer", "RenderResult", "emulate_relative_pose"]
-
-def aruco_dictionary(name: str):
-    """OpenCV predefined dictionary by its cv2.aruco constant name, e.g. "DICT_ARUCO_MIP_36H12"."""
-    for key in (name, name.upper()):
-        if key.startswith("DICT_") and isinstance(getattr(cv2.aruco, key, None), int):
-            return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, key))
-    raise ValueError(f"unknown ArUco dictionary {name!r}")
-
 
 @dataclass
 class RenderResult:
