@@ -120,7 +120,9 @@ class FprParameters:
         leg_length: l, distance A_i -> B_i (quadrotor CoM / spherical joint) [m].
         joint_offset: d, spherical-joint offset from the quadrotor CoM in its x-y plane [m] (neglected by the
             model, d = 0 in the dynamics, thesis §2.3.3; used by the simulator and the setpoint yaw rule).
-        joint_offset_angle: β, angle of B_iS_i from x_bi [rad] (also the desired-x rule, spec §1.7).
+        joint_offset_angle: β [rad]: x_bi lies at +β about z_bi from the direction B_iS_i of the joint, i.e.
+            B_iS_i = d·Rz(−β)·e_x in Fbi; the desired-x rule (3.37) (spec §1.7) puts x_bi at +β from the
+            horizontal −l_i, so the joint faces the leg.
         platform_mass: m_p [kg].
         leg_mass: m_l, one leg without its quadrotor [kg].
         platform_com: s_p, platform CoM in Fp [m], shape (3,).

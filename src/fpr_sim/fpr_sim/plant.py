@@ -9,8 +9,13 @@ Block diagram of one step ``dt`` (default 1 ms):
    every stage; the platform quaternion is re-normalised;
 3. the leg force on each quadrotor ``f_l,i = m_b,i a_i − f_i − m_b,i g − f_env,i`` (a_i from the tip velocity
    change over the step) gives the spherical-joint offset moment (2.93) ``m_l,i = (S_i − B_i) × f_l,i`` with
-   ``S_i − B_i = R_bi d [cos β, sin β, 0]`` (the physical lever from the CoM to the joint); the quadrotors'
-   attitude dynamics (2.92) are then advanced by RK4 with it.
+   ``S_i − B_i = R_bi d [cos β, sin β, 0]`` (the physical lever from the CoM to the joint), plus, for the
+   quadrotors standing on the ground, the landing gear's levelling and yaw-friction moments (bounded by the
+   gear's normal force, :meth:`Plant._add_landing_gear_moments`); the quadrotors' attitude dynamics (2.92) are
+   then advanced by RK4 with it.
+
+The PX4 rate controllers get the land-detector flag of each quadrotor (:meth:`Plant.uav_landed`: its gear
+touches the ground), which freezes their integrators as PX4 does.
 
 The structure state is integrated in platform-body velocities ξ = [R_pᵀ v_p, ω_p, θ̇]; ν (2.2) is derived.
 The 1 kHz loop runs on plain Python floats (numpy costs ~1 µs per call on 3-vectors); its results are checked
@@ -82,8 +87,11 @@ class Plant:
         self.environment = Environment(scenario)
         self.gear = float(scenario.quadrotor.landing_gear_height)
         self.uav_masses = np.array(self.params.uav_masses)
+        # B_iS_i in Fbi (thesis §2.3.3, Fig. 2.3): x_bi lies at +β about z_bi from B_iS_i, so B_iS_i = d·Rz(−β)·e_x.
+        # With the yaw rule (3.37) (x_bi at +β from the horizontal −l_i) the joint then faces the leg, i.e. points
+        # back toward the platform, as on the prototype (Rz(+β) would put it 90° sideways, off the leg).
         self.joint_offset = self.params.joint_offset * np.array(
-            [np.cos(self.params.joint_offset_angle), np.sin(self.params.joint_offset_angle), 0.0])
+            [np.cos(self.params.joint_offset_angle), -np.sin(self.params.joint_offset_angle), 0.0])
         self.ideal_attitude = False  #: tests: attitudes and thrusts follow the commands instantly
         self.time = 0.0
         self.steps = 0
@@ -109,6 +117,7 @@ class Plant:
         self._tips = None  # cached tip kinematics of _x_list
         self._tip_velocity_list = [(0.0, 0.0, 0.0)] * self.n
         self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * self.n
+        self._yaw_anchors = [math.nan] * self.n  # landing-gear yaw friction anchors [rad] (NaN: not touching)
         self.reset_to_initial_state()
 
     # ---------------------------------------------------------------------------------------------- state
@@ -147,6 +156,7 @@ class Plant:
         self._tip_velocity_list = self._tip_kinematics_list(self._x_list)[1]
         self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * n
         self.environment.ground.anchors[:] = np.nan
+        self._yaw_anchors = [math.nan] * n
 
     @property
     def state(self) -> StructureState:
@@ -182,6 +192,9 @@ class Plant:
             thrust = np.linalg.norm(forces, axis=1)
             self.fleet.quat = self.default_uav_attitudes(forces)
             self.fleet.hover_rotor_state(thrust)
+            # hovering already: the battery delivers the hover current, so the terminal voltage (and f_max(V),
+            # BATTERY_STATUS) is the loaded one from t = 0, as it will be after the first step
+            self.fleet.battery.update(thrust, 0.0)
 
     def default_uav_attitudes(self, thrust_vectors: np.ndarray | None = None) -> np.ndarray:
         """Attitudes (n, 4) with z_b along the thrust vectors (default: up) and the yaw rule (3.37) (β)."""
@@ -384,7 +397,7 @@ class Plant:
             if self.ideal_attitude:
                 fleet.set_ideal(self.command)
             else:
-                fleet.control(self.command)
+                fleet.control(self.command, landed=self.uav_landed())
             self._next_control += fleet.controller_period
         payload = env.payload_mass(self.time)
         if payload != self.structure.payload_mass:
@@ -431,6 +444,7 @@ class Plant:
             anchors = env.ground.anchors.tolist()
             for i in range(n):
                 env_uav[i] = list(env.ground.point_force(anchors[i], *feet[i], *tip_vel[i]))
+        foot_normals = [f[2] for f in env_uav]  # ground normal force on each quadrotor's gear [N] (before wind)
         if self._wind_list is not None:
             drag = self._uav_drag
             for i in range(n):
@@ -457,7 +471,9 @@ class Plant:
             b2 = r02 * f0 + r12 * f1 + r22 * f2
             body_moments.append([d1 * b2 - d2 * b1, d2 * b0 - d0 * b2, d0 * b1 - d1 * b0])
         if landed:
-            self._add_ground_leveling_moment(body_moments, uav_quats)
+            self._add_landing_gear_moments(body_moments, uav_quats, foot_normals)
+        else:
+            self._yaw_anchors = [math.nan] * n
         self._tip_velocity_list = tip_vel
         self._tip_acceleration_list = accelerations
         if self.ideal_attitude:
@@ -467,20 +483,68 @@ class Plant:
         self.time = (self.steps + 1) * dt
         self.steps += 1
 
-    def _add_ground_leveling_moment(self, body_moments: list[list[float]], uav_quats: list[list[float]]) -> None:
-        """Moment of the landing gear on quadrotors standing on the ground: a stiff torsional spring-damper
-        towards level (roll/pitch only), for the quadrotors whose feet touch (anchor set)."""
+    def uav_landed(self) -> list[bool]:
+        """Per quadrotor: its landing gear touches the ground (a ground anchor is set). This is what PX4's land
+        detector reports (landed / maybe_landed) for the rate controller's integrator freeze."""
+        return [a == a for a in self.environment.ground.anchors[:self.n, 0].tolist()]
+
+    def _add_landing_gear_moments(self, body_moments: list[list[float]], uav_quats: list[list[float]],
+                                  normals: list[float]) -> None:
+        """Moments of the landing gear on the quadrotors whose feet touch the ground (body FLU, N m), in place.
+
+        The gear is a unilateral contact of feet at ``landing_gear_radius`` r from the vehicle's centre, carrying
+        the normal force N_i of the quadrotor's ground contact (``normals``):
+
+        - levelling (roll/pitch): a torsional spring-damper towards level, ``k_l·(up_b × e_z) − c_l ω_xy`` with
+          ``k_l = 2 m_b g d_arm``, bounded by the tipping moment ``N_i r`` (no moment once the thrust carries
+          the vehicle, none that could pull it down);
+        - yaw: stick/slip friction of the feet, a torsional spring ``k_ψ = k_t r²`` (ground tangential stiffness)
+          to a yaw anchor with damping ``c_ψ = c_t r²``, bounded by ``μ N_i r``; the anchor slides when the bound
+          is reached (as the translational friction anchors of the environment) and is dropped on lift-off.
+
+        Without the yaw friction a disarmed quadrotor standing on the ground would spin freely under the
+        joint-offset moment (2.93) of the leg's horizontal force.
+        """
         anchors = self.environment.ground.anchors[:self.n, 0].tolist()
         rates = self.fleet.rate.tolist()
+        ground = self.scenario.ground
+        radius = float(self.scenario.quadrotor.landing_gear_radius)
         arm = self.scenario.quadrotor.arm_length
+        yaw_stiffness = ground.tangential_stiffness * radius * radius
+        yaw_damping = ground.tangential_damping * radius * radius
         for i, anchor in enumerate(anchors):
             if anchor != anchor:  # NaN: not touching
+                self._yaw_anchors[i] = math.nan
                 continue
-            _, _, _, _, _, _, up0, up1, _ = rotation_entries(*uav_quats[i])  # world z in body coordinates
+            qw, qx, qy, qz = uav_quats[i]
+            _, _, _, _, _, _, up0, up1, up2 = rotation_entries(qw, qx, qy, qz)  # world z in body coordinates
+            w0, w1, w2 = rates[i]
+            tipping = max(normals[i], 0.0) * radius
             stiffness = self._uav_masses[i] * self.params.gravity * 0.5 * arm * 4.0
             # tilt = up_body × e_z (body-frame axis·sin(angle) from body z to world up)
-            body_moments[i][0] += -stiffness * up1 - 0.2 * rates[i][0]
-            body_moments[i][1] += stiffness * up0 - 0.2 * rates[i][1]
+            m0 = -stiffness * up1 - 0.2 * w0
+            m1 = stiffness * up0 - 0.2 * w1
+            size = math.hypot(m0, m1)
+            if size > tipping:
+                scale = tipping / size
+                m0 *= scale
+                m1 *= scale
+            # yaw friction about the world vertical
+            yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+            yaw_anchor = self._yaw_anchors[i]
+            if yaw_anchor != yaw_anchor:
+                yaw_anchor = yaw
+            stretch = math.remainder(yaw - yaw_anchor, 2.0 * math.pi)
+            limit = ground.friction * max(normals[i], 0.0) * radius
+            if yaw_stiffness * abs(stretch) > limit:  # slipping: the anchor follows
+                stretch = math.copysign(limit / yaw_stiffness, stretch)
+                yaw_anchor = yaw - stretch
+            self._yaw_anchors[i] = yaw_anchor
+            mz = -yaw_stiffness * stretch - yaw_damping * (up0 * w0 + up1 * w1 + up2 * w2)
+            mz = min(max(mz, -limit), limit)
+            body_moments[i][0] += m0 + mz * up0
+            body_moments[i][1] += m1 + mz * up1
+            body_moments[i][2] += mz * up2
 
     # ---------------------------------------------------------------------------------------------- outputs
     def ground_truth(self) -> GroundTruth:

@@ -4,11 +4,14 @@ Vectorized over the n vehicles (arrays with a leading axis n). Per vehicle, with
 
 - attitude P loop (3.39): ``ω_d = 2·P·sgn(q_err,0)·q_err,1:3`` with ``q_err = q⁻¹ ∘ q_d``; P = 1/τ [1/s], so
   that a small attitude step is tracked as a first-order lag of time constant τ when the rates are tracked;
-- rate PID (3.40): ``m_d = K_P ε_ω + K_D ε̇_ω + K_I ∫ε_ω`` (derivative on the measurement, clamped integrator),
-  both at ``controller_rate`` (250 Hz, PX4) with zero-order hold in between;
+- rate PID (3.40): ``m_d = K_P ε_ω + K_D ε̇_ω + K_I ∫ε_ω`` (derivative on the measurement, clamped integrator;
+  as in PX4's mc_rate_control the integrator is reset while disarmed and FROZEN while the land detector says
+  landed, here: the vehicle's landing gear touches the ground), both at ``controller_rate`` (250 Hz, PX4)
+  with zero-order hold in between;
 - mixer (3.41): rotor thrusts ``T_j = c_T Ω_j²`` from ``[f_t, m_x, m_y, m_z]`` by the inverse of the "+"
-  allocation matrix (rotor 1 front +x, 2 left +y, 3 back, 4 right), with collective shifted to keep the
-  moments when a rotor saturates, then clipped to ``[0, f_max(V)/4]``;
+  allocation matrix (rotor 1 front +x, 2 left +y, 3 back, 4 right), desaturated as PX4 does with airmode off
+  (the collective is only ever reduced; roll/pitch, then yaw authority is given up instead), then clipped to
+  ``[0, f_max(V)/4]``;
 - collective command ``f_t = u_f · f_max(V)`` ((C.1) inverted, (C.2)) with the battery voltage V of
   :class:`Battery` (it drops over the flight, Table C.1 curve per vehicle);
 - first-order motor lag ``Ṫ_j = (T_j,cmd − T_j)/τ_m``;
@@ -80,26 +83,83 @@ class Battery:
 def mix(collective: np.ndarray, moments: np.ndarray, arm: float, kappa: float, rotor_max: np.ndarray) -> np.ndarray:
     """Rotor thrusts (n, 4) [N] from collective (n,) [N] and body moments (n, 3) [N m] by inverting (3.41).
 
-    ``arm`` d [m], ``kappa`` c_Q/c_T [m], ``rotor_max`` (n,) [N]. Moments are kept when possible: the
-    collective part is shifted down (up) when a rotor exceeds its maximum (goes below 0), then all are clipped.
-    See :func:`mix_one` (one vehicle, plain floats).
+    ``arm`` d [m], ``kappa`` c_Q/c_T [m], ``rotor_max`` (n,) [N]. Saturation is handled as PX4's mixer with
+    airmode off (the default): the collective is never raised above the command; see :func:`mix_one`.
     """
     return np.array([mix_one(f, m, arm, kappa, top) for f, m, top in
                      zip(_floats(collective), np.asarray(moments, dtype=float).tolist(), _floats(rotor_max),
                          strict=True)]).reshape(-1, 4)
 
 
+#: PX4 lets the yaw desaturation use 15 % of the actuator range above the maximum (mixYaw) [-]
+_YAW_HEADROOM = 0.15
+
+
 def mix_one(collective: float, moments: list[float], arm: float, kappa: float, rotor_max: float) -> list[float]:
-    """:func:`mix` for one vehicle: inverse of the "+" allocation (3.41) (rotor 1 front +x, 2 left +y, 3 back,
-    4 right; ``T_1..4`` [N]), collective shifted to keep the moments under saturation, clipped to [0, rotor_max]."""
+    """:func:`mix` for one vehicle, plain floats: inverse of the "+" allocation (3.41) (rotor 1 front +x, 2 left
+    +y, 3 back, 4 right; ``T_1..4`` [N]) with PX4's sequential desaturation, airmode disabled (PX4 default
+    MC_AIRMODE = 0; control_allocator ControlAllocationSequentialDesaturation::mixAirmodeDisabled):
+
+    1. collective + roll + pitch; desaturate along the collective direction, REDUCE ONLY (the thrust is never
+       increased to unsaturate a rotor: a low collective command stays low);
+    2. desaturate along the roll, then the pitch direction (the moments are reduced, not the thrust raised);
+    3. add yaw; desaturate along the yaw direction with 15 % headroom above ``rotor_max``; then along the
+       collective direction, reduce only;
+    4. clip to ``[0, rotor_max]``.
+
+    Each desaturation (PX4 desaturateActuators) moves the rotors along the axis by the gain that removes the
+    largest over- and under-shoot (``k_min + k_max``), then by half of the remaining gain. Unsaturated
+    commands are the exact inverse of (3.41).
+    """
     mx, my, mz = moments
+    half_arm = 0.5 / arm
+    quarter_kappa = 0.25 / kappa
     quarter = 0.25 * collective
-    rotors = [quarter + (-my / (2 * arm) - mz / (4 * kappa)), quarter + (mx / (2 * arm) + mz / (4 * kappa)),
-              quarter + (my / (2 * arm) - mz / (4 * kappa)), quarter + (-mx / (2 * arm) + mz / (4 * kappa))]
-    over = max(max(rotors) - rotor_max, 0.0)
-    rotors = [r - over for r in rotors]
-    under = max(-min(rotors), 0.0)
-    return [min(max(r + under, 0.0), rotor_max) for r in rotors]
+    roll_axis = (0.0, half_arm, 0.0, -half_arm)  # ∂T_j/∂m_x
+    pitch_axis = (-half_arm, 0.0, half_arm, 0.0)  # ∂T_j/∂m_y
+    yaw_axis = (-quarter_kappa, quarter_kappa, -quarter_kappa, quarter_kappa)  # ∂T_j/∂m_z
+    thrust_axis = (0.25, 0.25, 0.25, 0.25)  # ∂T_j/∂f_t
+    rotors = [quarter + mx * r + my * p for r, p in zip(roll_axis, pitch_axis, strict=True)]
+    if min(rotors) < 0.0 or max(rotors) > rotor_max:  # (inside the bounds every desaturation gain is 0)
+        _desaturate(rotors, thrust_axis, rotor_max, reduce_only=True)
+        _desaturate(rotors, roll_axis, rotor_max)
+        _desaturate(rotors, pitch_axis, rotor_max)
+    rotors = [t + mz * y for t, y in zip(rotors, yaw_axis, strict=True)]
+    if min(rotors) < 0.0 or max(rotors) > rotor_max:
+        _desaturate(rotors, yaw_axis, rotor_max * (1.0 + _YAW_HEADROOM))
+        _desaturate(rotors, thrust_axis, rotor_max, reduce_only=True)
+    return [min(max(t, 0.0), rotor_max) for t in rotors]
+
+
+def _desaturation_gain(rotors: list[float], axis: tuple, top: float) -> float:
+    """PX4 computeDesaturationGain: ``k_min + k_max`` over the rotors outside [0, top] of the gains that bring
+    each back to its bound along ``axis`` (rotors the axis does not move are skipped)."""
+    k_min = k_max = 0.0
+    for t, a in zip(rotors, axis, strict=True):
+        if a == 0.0:
+            continue
+        if t < 0.0:
+            k = -t / a
+        elif t > top:
+            k = (top - t) / a
+        else:
+            continue
+        k_min = min(k_min, k)
+        k_max = max(k_max, k)
+    return k_min + k_max
+
+
+def _desaturate(rotors: list[float], axis: tuple, top: float, reduce_only: bool = False) -> None:
+    """PX4 desaturateActuators, in place: move along ``axis`` by the desaturation gain, then by half the gain
+    that remains; ``reduce_only`` (for the collective axis) skips the move if the first gain is positive."""
+    gain = _desaturation_gain(rotors, axis, top)
+    if reduce_only and gain > 0.0:
+        return
+    for j in range(4):
+        rotors[j] += gain * axis[j]
+    gain = 0.5 * _desaturation_gain(rotors, axis, top)
+    for j in range(4):
+        rotors[j] += gain * axis[j]
 
 
 class QuadrotorFleet:
@@ -182,14 +242,17 @@ class QuadrotorFleet:
         self._rotor_commands = [list(r) for r in self._rotors]
 
     # ----------------------------------------------------------------------------------------------
-    def control(self, command: AttitudeCommand, measured_rate: np.ndarray | None = None) -> None:
+    def control(self, command: AttitudeCommand, measured_rate: np.ndarray | None = None,
+                landed: list[bool] | None = None) -> None:
         """One PX4 attitude + rate controller update (3.39)-(3.41), held for ``controller_period``.
 
         Per vehicle and axis: ``ω_d = clip(2 P sgn(q_err,0) q_err,1:3 + ω_ff, ±ω_max)`` (3.39) with
         ``q_err = q⁻¹ ∘ q_d`` (fpr_model.rotations.quat_error), ``m = K_P ε + K_I ∫ε − K_D ω̇`` (3.40; integral
-        reset while disarmed and clamped to ``|K_I ∫ε| ≤ limit``), rotor commands by :func:`mix_one` (3.41)
-        from ``f_t = clip(u_f, 0, 1)·f_max(V)``; zero while disarmed."""
+        reset while disarmed, frozen while ``landed[i]`` (PX4 RateControl::update(..., landed): no integration
+        against the ground) and clamped to ``|K_I ∫ε| ≤ limit``), rotor commands by :func:`mix_one` (3.41)
+        from ``f_t = clip(u_f, 0, 1)·f_max(V)``; zero while disarmed. ``landed`` (n,) defaults to all False."""
         dt = self.controller_period
+        on_ground = [False] * self.n if landed is None else [bool(v) for v in landed]
         rates = self._rate if measured_rate is None else _rows(measured_rate)
         self.f_max = self.max_thrust()
         errors = quat_error(np.array(self._quat), command.quat).tolist()
@@ -211,7 +274,12 @@ class QuadrotorFleet:
                     sp += feedforward[i][k]
                 sp = min(max(sp, -max_rate[k]), max_rate[k])
                 error = sp - rate[k]
-                acc = integral[k] + error * dt if armed[i] else 0.0
+                if not armed[i]:
+                    acc = 0.0
+                elif on_ground[i]:
+                    acc = integral[k]
+                else:
+                    acc = integral[k] + error * dt
                 acc = min(max(acc, -bounds[k]), bounds[k])
                 derivative = (rate[k] - previous[k]) / dt  # on the measurement (PX4)
                 setpoint.append(sp)

@@ -49,7 +49,11 @@ class InitialState:
 
     ``mode``: ``"ground"`` (quadrotors resting on the ground plane, platform level above them, motors off) or
     ``"hover"`` (in the air at ``position``, at rest; the PX4 emulators start armed in OFFBOARD with the hover
-    setpoint held until the first setpoint arrives only if ``armed`` is true).
+    setpoint held until the first setpoint arrives only if ``armed`` is true). A hover start is a vehicle that
+    has been flying: the rotors deliver the hover thrusts J⁻ᵀg and the battery already carries their current, so
+    the terminal voltage (BATTERY_STATUS, f_max(V) of (C.2)) is the loaded one from t = 0 (≈ 12.13 V with the
+    default battery, not the unloaded 12.4 V): the held hover thrust and every later setpoint normalized with the
+    reported voltage give the same newtons.
     """
 
     mode: str = "ground"
@@ -71,6 +75,7 @@ class QuadrotorConfig:
         default_factory=lambda: [[8.02, -61.66], [8.22, -64.01], [8.15, -62.28]]
     )  #: per-UAV [a_f [N/V], b_f [N]] of (C.2) (Table C.1); the last row repeats for UAVs beyond the list
     landing_gear_height: float = 0.10  #: CoM height above the feet [m]
+    landing_gear_radius: float = 0.15  #: feet distance from the vehicle's centre [m] (tipping and yaw-friction lever)
 
 
 @dataclass
@@ -91,7 +96,7 @@ class Px4Config:
 
     attitude_p_gain: list[float] = field(default_factory=lambda: [6.5, 6.5, 2.8])  #: 2/τ·... : rate = P·2·q_err [1/s]
     rate_p_gain: list[float] = field(default_factory=lambda: [0.9, 0.9, 0.6])  #: K_P [N m s/rad]
-    rate_i_gain: list[float] = field(default_factory=lambda: [0.2, 0.2, 0.1])  #: K_I [N m/rad]
+    rate_i_gain: list[float] = field(default_factory=lambda: [1.2, 1.2, 0.6])  #: K_I [N m/rad], I/P as PX4 defaults
     rate_d_gain: list[float] = field(default_factory=lambda: [0.004, 0.004, 0.0])  #: K_D [N m s²/rad]
     rate_integrator_limit: float = 0.3  #: |K_I ∫ε| bound [N m]
     max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
@@ -310,6 +315,8 @@ def scenario_from_dict(data: dict | None) -> Scenario:
     for name in ("full_voltage", "empty_voltage", "capacity"):
         if getattr(scenario.battery, name) <= 0.0:
             raise ValueError(f"battery.{name}: must be > 0")
+    if scenario.quadrotor.landing_gear_radius <= 0.0 or scenario.quadrotor.landing_gear_height < 0.0:
+        raise ValueError("quadrotor.landing_gear_radius must be > 0 and quadrotor.landing_gear_height >= 0")
     if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
         raise ValueError("px4.controller_rate and cameras.rate must be > 0")
     return scenario

@@ -87,6 +87,8 @@ class SimulatorNode(Node):
         self._next_truth = 0.0
         self._next_camera = 0.0
         self._last_timeouts = 0
+        self._wall_start: float | None = None
+        self._sim_start = 0.0
         self.get_logger().info(
             f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
             f"sending to {self.sim.remote_ports}, "
@@ -94,31 +96,38 @@ class SimulatorNode(Node):
 
     # ------------------------------------------------------------------------------------------------
     def run(self) -> None:
-        wall_start = time.monotonic()
-        sim_start = self.sim.time
-        while rclpy.ok():
-            self.sim.advance(self.clock_period)
-            t = self.sim.time
-            self.clock_pub.publish(Clock(clock=_stamp(t)))
-            if t + 1e-9 >= self._next_truth:
-                self._next_truth += self.truth_period
-                self.truth_pub.publish(self._truth_message())
-            if self.cameras is not None and t + 1e-9 >= self._next_camera:
-                self._next_camera += self.camera_period
-                self._publish_cameras(t)
-            if self.sim.lockstep_timeouts != self._last_timeouts:
-                self._last_timeouts = self.sim.lockstep_timeouts
-                self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
-                                          "for setpoints", throttle_duration_sec=5.0)
+        """Step until shutdown or ``duration``, spinning this node's own callbacks (parameter services)."""
+        while rclpy.ok(context=self.context) and self.step():
             rclpy.spin_once(self, timeout_sec=0.0)
-            if self.real_time_factor > 0.0:
-                ahead = (t - sim_start) / self.real_time_factor - (time.monotonic() - wall_start)
-                if ahead > 0.0:
-                    time.sleep(ahead)
-            if self.duration > 0.0 and t >= self.duration:
-                self.get_logger().info(f"duration {self.duration} s reached: stopping "
-                                       f"(lockstep timeouts: {self.sim.lockstep_timeouts})")
-                break
+
+    def step(self) -> bool:
+        """Advance one ``/clock`` period (lockstep included), publish what is due, pace to
+        ``real_time_factor``; False once ``duration`` is reached. For hosts that spin this node in their own
+        executor and drive the simulation from another thread (tests/swarm_graph.py)."""
+        if self._wall_start is None:
+            self._wall_start, self._sim_start = time.monotonic(), self.sim.time
+        self.sim.advance(self.clock_period)
+        t = self.sim.time
+        self.clock_pub.publish(Clock(clock=_stamp(t)))
+        if t + 1e-9 >= self._next_truth:
+            self._next_truth += self.truth_period
+            self.truth_pub.publish(self._truth_message())
+        if self.cameras is not None and t + 1e-9 >= self._next_camera:
+            self._next_camera += self.camera_period
+            self._publish_cameras(t)
+        if self.sim.lockstep_timeouts != self._last_timeouts:
+            self._last_timeouts = self.sim.lockstep_timeouts
+            self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
+                                      "for setpoints", throttle_duration_sec=5.0)
+        if self.real_time_factor > 0.0:
+            ahead = (t - self._sim_start) / self.real_time_factor - (time.monotonic() - self._wall_start)
+            if ahead > 0.0:
+                time.sleep(ahead)
+        if self.duration > 0.0 and t >= self.duration:
+            self.get_logger().info(f"duration {self.duration} s reached: stopping "
+                                   f"(lockstep timeouts: {self.sim.lockstep_timeouts})")
+            return False
+        return True
 
     def _truth_message(self) -> FprState:
         truth = self.sim.ground_truth()

@@ -2,9 +2,10 @@
 
 ``python src/fpr_sim/test/plant_oracle_cases.py`` (with src/fpr_model and src/fpr_sim on the path, e.g.
 ``PYTHONPATH=src/fpr_model:src/fpr_sim .venv/bin/python src/fpr_sim/test/plant_oracle_cases.py``) runs every
-case below and saves the recorded samples to ``data/plant_oracle.npz``. The committed file was generated with
-the numpy-vectorized plant of commit 99797a6 (before the scalar rewrite) and is a FROZEN fixture: regenerate it
-only after a deliberate change of the physics. ``test_plant_oracle.py`` replays the same cases and compares.
+case below and saves the recorded samples to ``data/plant_oracle.npz``, a FROZEN fixture: regenerate it only
+after a deliberate change of the physics, and say why in test_plant_oracle.py's docstring (its history is there:
+first the numpy plant of commit 99797a6, now the scalar plant after the ground / take-off fix).
+``test_plant_oracle.py`` replays the same cases and compares.
 
 Each case is 2 s (or 1.5 s) of the plant at 1 kHz driven by scripted PX4 attitude/thrust commands
 (attitude controller (3.39)-(3.41) active unless ``ideal``): hover manoeuvres, a payload attached and dropped,

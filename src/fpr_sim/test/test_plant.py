@@ -78,3 +78,24 @@ def test_battery_voltage_drops_and_thrust_follows_table_c1():
     fleet.battery.update(np.full(3, 10.0), 10.0)
     assert np.all(fleet.battery.voltage() < v0)
     assert np.all(fleet.max_thrust() < f0)
+
+
+def test_hover_start_holds_the_hover_thrust_with_the_battery_under_load():
+    """A hover start is a vehicle that has been flying: its battery voltage is the loaded one from t = 0, so the
+    PX4 hold thrust normalized at t = 0 gives the hover thrusts (before: f_max(12.4 V) at t = 0, then the sag of the
+    first step cut the thrust by 5.8 %)."""
+    from fpr_sim.simulation import Simulation, SimulationOptions
+
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "armed": True}, "ground": {"enabled": False},
+                                   "cameras": {"enabled": False}})
+    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=False))
+    try:
+        plant = sim.plant
+        hover = plant.fleet.thrust()
+        v0 = plant.fleet.battery.voltage()
+        assert np.all(v0 < plant.scenario.battery.full_voltage - 0.2)  # 1.6 A/N · 11.4 N · 15 mΩ ≈ 0.27 V of sag
+        sim.advance(0.1)
+        assert plant.fleet.battery.voltage() == pytest.approx(v0, abs=2e-3)  # only the charge drawn in 0.1 s
+        assert plant.fleet.thrust() == pytest.approx(hover, rel=2e-3)
+    finally:
+        sim.close()
