@@ -81,6 +81,9 @@ class Simulation:
         self._truth = truth
         if scenario.initial_state.mode == "hover" and scenario.initial_state.armed:
             self._start_hovering()
+        # PX4 reports its status (battery voltage included) from boot: the first BATTERY_STATUS / SYS_STATUS go out
+        # at t = 0, so a bridge normalizes thrust with the real voltage from the start (no fallback-voltage step).
+        self._send_telemetry(status=True)
 
     def _start_hovering(self) -> None:
         """Armed in OFFBOARD with the hover setpoint held (as if the stream had been running)."""
