@@ -9,8 +9,9 @@ setpoint frames and thrust normalization end-to-end, telemetry frames, setpoint-
 
 ROS part: the px4_bridge node in-process with its DEFAULT port (udp://127.0.0.1:14540) against a simulation with
 the DEFAULT emulator ports (bind 14580 + i - 1, send to 14540 + i - 1), teleop ARM then FLY on /fpr/teleop,
-setpoints on /fpr/uav1/setpoint, status / imu / velocity_body read back. (Fixed ports are safe: the tests run in a
-private network namespace, scripts/run_tests.sh.)
+setpoints on /fpr/uav1/setpoint, status / imu read back, all on simulation time (use_sim_time, /clock at 250 Hz
+published by the test thread, which advances the simulation core in lockstep with the node's stream timer). (Fixed
+ports are safe: the tests run in a private network namespace, scripts/run_tests.sh.)
 """
 
 from __future__ import annotations
@@ -333,103 +334,196 @@ def test_setpoint_stream_loss_stops_the_bridge_and_triggers_the_px4_failsafe(hov
 
 
 # ------------------------------------------------------------------------------------------------ ROS node
+CLOCK_STEP = 0.004  # [s] /clock period of the node test: 250 Hz of simulation time, as the simulator (DESIGN.md §5)
+#: [s] wall: the lockstep's wait for the bridge's setpoint. The test waits for each bridge tick, so the setpoint is
+#: on PX4's socket before the simulation reaches the boundary: the lockstep waits only once, in vain, at the silence
+NODE_LOCKSTEP_TIMEOUT = 0.2
+WALL_LIMIT = 60.0  # [s] hang guard per phase; the phases themselves are judged in simulation time only
+
+
+def _wait_wall(condition, timeout: float, what: str) -> None:
+    """Wait (wall clock, a hang guard only) until ``condition()``, leaving the GIL to the executor threads."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"{what}: not within {timeout} s of wall time (hang guard)"
+        time.sleep(0.0002)
+
+
 def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
+    """All on simulation time, as in the real system: the test thread is the simulator (it advances the core in
+    lockstep by CLOCK_STEP, publishes /clock, and waits until the bridge node's clock shows it, so no /clock value
+    is skipped and nothing races ahead) and the controller (setpoint and teleop mode at each 20 ms control period
+    of simulation time); the bridge node runs with use_sim_time, so its stream timer, timeouts, warm-up, retries
+    and status are simulation time and its stream is deterministic relative to it."""
     rclpy = pytest.importorskip("rclpy")
     from fpr_px4_bridge.px4_bridge_node import Px4BridgeNode
-    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from rclpy.time import Time
+    from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu
 
     from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus
 
-    sim = Simulation(_scenario("ground"), SimulationOptions(lockstep=True, lockstep_timeout=0.3))  # 14580+, to 14540+
-    rclpy.init()
-    executor = MultiThreadedExecutor(num_threads=2)
+    sim = Simulation(_scenario("ground"), SimulationOptions(lockstep=True, lockstep_timeout=NODE_LOCKSTEP_TIMEOUT))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    spinning = threading.Event()
     spinner = None
     bridge = test_node = None
+    sim_time = [Parameter("use_sim_time", value=True)]
     try:
-        assert sim.ports == [14580, 14581, 14582] and sim.remote_ports == [14540, 14541, 14542]
-        bridge = Px4BridgeNode(namespace="/fpr/uav1", parameter_overrides=[
+        assert sim.ports == [14580, 14581, 14582] and sim.remote_ports == [14540, 14541, 14542]  # 14580+ -> 14540+
+        bridge = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=sim_time + [
             Parameter("uav_id", value=1), Parameter("command_max_attempts", value=20)])  # default connection URL
         assert bridge.link.local_address == ("127.0.0.1", 14540)
-        test_node = rclpy.create_node("bridge_emulator_test")
+        test_node = rclpy.create_node("bridge_emulator_test", context=context, parameter_overrides=sim_time)
         statuses, imus = [], []
         test_node.create_subscription(UavStatus, "/fpr/uav1/status", statuses.append, 10)
         test_node.create_subscription(Imu, "/fpr/uav1/imu", imus.append, qos_profile_sensor_data)
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+        clock_pub = test_node.create_publisher(Clock, "/clock", 10)
         teleop_pub = test_node.create_publisher(TeleopCommand, "/fpr/teleop", best_effort)
         setpoint_pub = test_node.create_publisher(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", best_effort)
-        command = {"mode": TeleopCommand.MODE_IDLE, "setpoint": None}
-
-        def publish() -> None:  # 50 Hz, wall clock: the controller's setpoint and the operator's mode
-            teleop = TeleopCommand()
-            teleop.mode = command["mode"]
-            teleop_pub.publish(teleop)
-            if command["setpoint"] is not None:
-                q, thrust = command["setpoint"]
-                msg = AttitudeThrustSetpoint()
-                msg.uav_id = 1
-                msg.attitude.w, msg.attitude.x, msg.attitude.y, msg.attitude.z = (float(v) for v in q)
-                msg.thrust = float(thrust)
-                setpoint_pub.publish(msg)
-
-        test_node.create_timer(CONTROL_PERIOD, publish)
         executor.add_node(bridge)
         executor.add_node(test_node)
-        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinning.set()
+
+        def spin() -> None:
+            while spinning.is_set():
+                executor.spin_once(timeout_sec=0.05)
+
+        spinner = threading.Thread(target=spin, daemon=True)
         spinner.start()
-        deadline = time.monotonic() + 10.0
-        while teleop_pub.get_subscription_count() == 0 or setpoint_pub.get_subscription_count() == 0 \
-                or not statuses:
-            assert time.monotonic() < deadline, "discovery timed out"
-            sim.advance(CONTROL_PERIOD)  # the emulator talks first; the bridge's status shows it
-            time.sleep(0.005)
+        _wait_wall(lambda: clock_pub.get_subscription_count() >= 2 and teleop_pub.get_subscription_count() >= 1
+                   and setpoint_pub.get_subscription_count() >= 1 and bridge.status_pub.get_subscription_count() >= 1
+                   and bridge.imu_pub.get_subscription_count() >= 1, 10.0, "discovery")
 
-        def run_until(condition, sim_timeout: float, what: str) -> None:
-            sim_deadline, wall_deadline = sim.time + sim_timeout, time.monotonic() + 8.0 * sim_timeout + 5.0
+        emulator = sim.emulators[0]
+        command = {"mode": TeleopCommand.MODE_IDLE, "setpoint": None}
+        stream = {"count": 0, "first_at": None, "last_at": None}  # setpoints received by PX4 1 (simulation time)
+        ticks: list[float] = []  # the bridge's periodic steps (stream, commands, HEARTBEAT), at its clock
+        bridge_tick = bridge.bridge.tick
+
+        def recorded_tick(now: float):
+            ticks.append(now)
+            return bridge_tick(now)
+
+        bridge.bridge.tick = recorded_tick  # observed, not changed: the lockstep below waits for each tick
+        steps_per_period = int(round(CONTROL_PERIOD * sim.options.physics_rate))
+
+        def step() -> None:
+            """CLOCK_STEP of simulation (lockstep), /clock, then at each control period the controller's output."""
+            sim.advance(CLOCK_STEP)
+            if emulator.counters.setpoints != stream["count"]:
+                stream["count"], stream["last_at"] = emulator.counters.setpoints, sim.time
+                stream["first_at"] = stream["first_at"] or sim.time
+            stamp = Time(nanoseconds=int(round(sim.time * 1e9)))
+            clock_pub.publish(Clock(clock=stamp.to_msg()))
+            _wait_wall(lambda: bridge.get_clock().now().nanoseconds >= stamp.nanoseconds, WALL_LIMIT,
+                       f"bridge clock at {sim.time:.3f} s")
+            if sim.plant.steps % steps_per_period == 0:
+                # the bridge's stream timer (50 Hz of simulation time) has run at this control period: what it sent
+                # is on PX4's socket before the simulation moves on (the lockstep then sees it at this very time)
+                _wait_wall(lambda: ticks and ticks[-1] >= sim.time - 1e-6, WALL_LIMIT,
+                           f"bridge tick at {sim.time:.3f} s")
+                teleop = TeleopCommand()
+                teleop.mode = command["mode"]
+                teleop_pub.publish(teleop)
+                if command["setpoint"] is not None:
+                    q, thrust = command["setpoint"]
+                    msg = AttitudeThrustSetpoint()
+                    msg.header.stamp = stamp.to_msg()
+                    msg.uav_id = 1
+                    msg.attitude.w, msg.attitude.x, msg.attitude.y, msg.attitude.z = (float(v) for v in q)
+                    msg.thrust = float(thrust)
+                    setpoint_pub.publish(msg)
+
+        def run_until(condition, sim_timeout: float, what: str) -> float:
+            """Step until ``condition()`` (at most ``sim_timeout`` s of simulation); return the simulation time."""
+            sim_deadline, wall_deadline = sim.time + sim_timeout, time.monotonic() + WALL_LIMIT
             while not condition():
-                assert sim.time < sim_deadline and time.monotonic() < wall_deadline, \
-                    f"{what}: not reached (last status {statuses[-1] if statuses else None})"
-                sim.advance(CONTROL_PERIOD)  # lockstep: paced by the bridge's stream once it runs
-                if not any(e.counters.setpoints for e in sim.emulators):
-                    time.sleep(0.002)  # no lockstep yet: leave the executor threads some of the GIL
+                assert sim.time < sim_deadline, \
+                    f"{what}: not reached within {sim_timeout} s of simulation (last status " \
+                    f"{statuses[-1] if statuses else None})"
+                assert time.monotonic() < wall_deadline, f"{what}: hang guard ({WALL_LIMIT} s wall)"
+                step()
+            return sim.time
 
-        run_until(lambda: statuses[-1].connected and imus, 3.0, "connected")
+        run_until(lambda: statuses and statuses[-1].connected and imus, 3.0, "connected")
         assert statuses[-1].state == UavStatus.STATE_IDLE and statuses[-1].mode_name == "POSCTL"
+        assert not statuses[-1].armed and not statuses[-1].failsafe
         orientation = imus[-1].orientation
         q_local = np.array([orientation.w, orientation.x, orientation.y, orientation.z])
         q_local /= np.linalg.norm(q_local)
         thrust_newton = 0.5 * float(np.linalg.norm(_hover_forces(sim.plant)[0]))  # stays on the ground
         command["setpoint"] = (q_local, thrust_newton)  # the present attitude, in UAV 1's own frame
         command["mode"] = TeleopCommand.MODE_ARM
-        emulator = sim.emulators[0]
-        run_until(lambda: emulator.armed, 6.0, "armed")
+        arm_at = sim.time
+        armed_at = run_until(lambda: emulator.armed, 6.0, "armed")
+        # PX4 refuses ARM before 1 s of stream; the bridge retries every 0.5 s (simulation time)
+        armed_after = armed_at - stream["first_at"]
+        assert 1.0 <= armed_after <= 1.0 + OffboardConfig().command_retry_interval + 2 * CONTROL_PERIOD + CLOCK_STEP
         command["mode"] = TeleopCommand.MODE_FLY
         run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD and statuses[-1].offboard, 8.0, "OFFBOARD")
-        assert emulator.offboard and statuses[-1].mode_name == "OFFBOARD" and statuses[-1].armed
+        status = statuses[-1]
+        # confirmed by PX4's HEARTBEAT: custom_mode OFFBOARD (main mode 6)
+        assert status.px4_custom_mode == Px4MainMode.OFFBOARD << 16 and status.mode_name == "OFFBOARD"
+        assert emulator.offboard and status.armed and not status.failsafe
+        requested_at = bridge.bridge.machine.offboard_requested_at
+        assert requested_at is not None and requested_at - arm_at >= OffboardConfig().offboard_warmup
         assert _angle(emulator.quat_local, q_local) < 1e-6
-        voltage = statuses[-1].battery_voltage
         coefficients = thrust_coefficients(1)
         assert emulator.thrust == pytest.approx(
-            thrust_newton / max_thrust(voltage, coefficients.a_f, coefficients.b_f), rel=0.02)
+            thrust_newton / max_thrust(status.battery_voltage, coefficients.a_f, coefficients.b_f), rel=0.02)
         orientation = imus[-1].orientation
         q_imu = [orientation.w, orientation.x, orientation.y, orientation.z]
         q_truth_local = sim.sensors.world_to_local_quat(0, sim.plant.fleet.quat[0])
         # in UAV 1's local frame F0i (yaw offset 0.3 rad from the world); the message may be a few periods old
         assert _angle(q_imu, q_truth_local) < 0.15 < _angle(q_imu, sim.plant.fleet.quat[0])
-        # the controller goes silent: the bridge stops streaming, PX4's offboard-loss failsafe takes over
+        # time_boot_ms -> ROS time: PX4's boot clock is the simulation clock here, so the offset is ~0 (at most
+        # the /clock lag behind the MAVLink telemetry) and the IMU stamps are simulation times
+        offset = bridge.bridge.telemetry.mapper.offset
+        assert offset is not None and -CONTROL_PERIOD <= offset <= CLOCK_STEP
+        imu_stamp = Time.from_msg(imus[-1].header.stamp).nanoseconds * 1e-9
+        assert sim.time - 3 * CONTROL_PERIOD <= imu_stamp <= sim.time + 1e-9
+
+        # the stream in simulation time, from its start to OFFBOARD (> 2 s): >= 50 Hz at PX4, and as the bridge
+        # reports it (over its last second)
+        rate_at_px4 = (stream["count"] - 1) / (stream["last_at"] - stream["first_at"])
+        print(f"setpoints at PX4: {rate_at_px4:.1f} Hz over {stream['last_at'] - stream['first_at']:.2f} s "
+              f"(simulation time), bridge status {status.setpoint_rate} Hz, armed {armed_after:.3f} s after "
+              f"the first setpoint, OFFBOARD requested after {requested_at - arm_at:.3f} s")
+        assert rate_at_px4 >= 50.0 and status.setpoint_rate >= 50.0
+
+        # the controller goes silent: the bridge repeats the last setpoint for setpoint_timeout, then stops (its
+        # failsafe); PX4's offboard-loss failsafe (COM_OF_LOSS_T = 1 s) takes over: AUTO.LOITER
         command["setpoint"] = None
-        run_until(lambda: emulator.counters.failsafes >= 1, 3.0, "PX4 failsafe")
+        stop_at = sim.time  # the last setpoint was published at this control period
+        failsafe_at = run_until(lambda: emulator.counters.failsafes >= 1, 3.0, "PX4 failsafe")
         assert emulator.main_mode == Px4MainMode.AUTO
+        setpoint_timeout = BridgeConfig().setpoint_timeout
+        stopped_after = stream["last_at"] - stop_at
+        assert setpoint_timeout - CONTROL_PERIOD <= stopped_after <= setpoint_timeout + CONTROL_PERIOD + CLOCK_STEP
+        assert 1.0 - CLOCK_STEP <= failsafe_at - stream["last_at"] <= 1.0 + 2 * CLOCK_STEP
         run_until(lambda: statuses[-1].failsafe and statuses[-1].mode_name == "AUTO.LOITER", 2.0, "status failsafe")
+        status = statuses[-1]
+        assert status.state == UavStatus.STATE_FAILSAFE and status.connected and status.armed
+        assert status.px4_custom_mode == (Px4MainMode.AUTO << 16 | Px4AutoSubMode.LOITER << 24)
+        print(f"stream stopped {stopped_after:.3f} s after the last setpoint, PX4 failsafe "
+              f"{failsafe_at - stream['last_at']:.3f} s after the last frame; lockstep timeouts "
+              f"{sim.lockstep_timeouts}")
+        assert sim.lockstep_timeouts == 1  # only at the silence: every tick's setpoint was there in time
     finally:
-        executor.shutdown(timeout_sec=2.0)
+        spinning.clear()  # stop spinning before anything is destroyed (no callback on a destroyed handle)
         if spinner is not None:
-            spinner.join(timeout=2.0)
+            spinner.join(timeout=5.0)
+        executor.shutdown(timeout_sec=2.0)
         if bridge is not None:
             bridge.destroy_node()
         if test_node is not None:
             test_node.destroy_node()
         sim.close()
-        rclpy.try_shutdown()
+        rclpy.try_shutdown(context=context)

@@ -192,8 +192,17 @@ class Px4BridgeNode(Node):
                 return  # socket closed at shutdown
             if not ready or not self._running:
                 continue
+            now = self._now()
+            if now <= 0.0:
+                # use_sim_time before the first /clock: no time to judge or stamp with. Drop the input, or its
+                # zero receive time would skew the time_boot_ms mapping (and link age) once the clock runs.
+                with self._lock:
+                    dropped = len(self.link.receive())
+                self.get_logger().info(f"no /clock yet (use_sim_time): dropped {dropped} MAVLink messages",
+                                       throttle_duration_sec=5.0)
+                continue
             with self._lock:
-                samples = self.bridge.poll(self._now())
+                samples = self.bridge.poll(now)
                 events = self.bridge.take_events()
             self._log.emit(events)
             for sample in samples:

@@ -3,7 +3,12 @@
 The fake answers like PX4 does for what the bridge uses: HEARTBEAT (armed flag, custom_mode), COMMAND_LONG
 ARM/DISARM and DO_SET_MODE with COMMAND_ACK (OFFBOARD refused unless setpoints arrived in the last 0.5 s, as
 PX4's proof-of-life rule), and telemetry (ATTITUDE_QUATERNION, HIGHRES_IMU, ODOMETRY, SYS_STATUS).
-Every received SET_ATTITUDE_TARGET and COMMAND_LONG is recorded with its arrival time (time.monotonic()).
+Every received SET_ATTITUDE_TARGET and COMMAND_LONG is recorded with its arrival time on the fake's clock.
+
+Clock: wall time (``time.monotonic()``) by default, the fake paces itself in its thread. With ``clock=`` (a
+callable returning simulation time [s]) the test paces it: :meth:`FakePx4.emit_due` sends what is due at that
+time (HEARTBEATs, telemetry), the thread only receives; its boot clock is then the simulation clock
+(``time_boot_ms`` = simulation time), like the simulator's PX4 emulator.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import socket
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,8 +58,14 @@ class FakePx4:
     """A PX4 stand-in talking MAVLink 2 over UDP to a bridge listening at ``bridge_address``."""
 
     def __init__(self, bridge_address, system_id: int = 1, signing_key: bytes | None = None,
-                 heartbeat_rate: float = 10.0, telemetry_rate: float = 20.0) -> None:
+                 heartbeat_rate: float = 10.0, telemetry_rate: float = 20.0,
+                 clock: Callable[[], float] | None = None) -> None:
         self.bridge_address = bridge_address
+        self.self_paced = clock is None
+        self.clock = time.monotonic if clock is None else clock
+        self._boot: float | None = None if clock is None else 0.0  # simulation: boot clock = simulation clock
+        self._next_hb: float | None = None
+        self._next_tel: float | None = None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.02)
@@ -135,32 +147,38 @@ class FakePx4:
             self.armed = msg.param1 > 0.5
         elif msg.command == p.MAV_CMD_DO_SET_MODE:
             main, sub = int(msg.param2), int(msg.param3)
-            recent = self.setpoints and time.monotonic() - self.setpoints[-1].t < 0.5
+            recent = self.setpoints and self.clock() - self.setpoints[-1].t < 0.5
             if main == p.Px4MainMode.OFFBOARD and not recent:
                 result = 1  # TEMPORARILY_REJECTED: no offboard proof of life
             else:
                 self.custom_mode = p.encode_custom_mode(main, sub)
         self.send(self.mav.command_ack_encode(command=msg.command, result=result))
 
+    def emit_due(self) -> None:
+        """Send the HEARTBEATs and telemetry due at ``clock()`` (called by the thread when self-paced)."""
+        now = self.clock()
+        if self._next_hb is None or self._next_tel is None:
+            self._next_hb = self._next_tel = now
+            self._boot = now if self._boot is None else self._boot
+        if now >= self._next_hb:
+            self._next_hb += 1.0 / self.heartbeat_rate
+            if self.send_heartbeats:
+                self._heartbeat()
+        if now >= self._next_tel and self.telemetry_rate > 0:
+            self._next_tel += 1.0 / self.telemetry_rate
+            self._telemetry(int(round((now - self._boot) * 1000)))
+
     def _loop(self) -> None:
-        start = time.monotonic()
-        next_hb = next_tel = start
         parser = mavlink.MAVLink(None)
         parser.robust_parsing = True
         while self._running:
-            now = time.monotonic()
-            if now >= next_hb:
-                next_hb += 1.0 / self.heartbeat_rate
-                if self.send_heartbeats:
-                    self._heartbeat()
-            if now >= next_tel and self.telemetry_rate > 0:
-                next_tel += 1.0 / self.telemetry_rate
-                self._telemetry(int((now - start) * 1000))
+            if self.self_paced:
+                self.emit_due()
             try:
                 data, _ = self.sock.recvfrom(65535)
             except (TimeoutError, OSError):
                 continue
-            t = time.monotonic()
+            t = self.clock()
             try:
                 msgs = parser.parse_buffer(data) or []
             except Exception:  # noqa: BLE001

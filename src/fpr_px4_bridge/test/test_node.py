@@ -1,4 +1,12 @@
-"""px4_bridge node in process (real rclpy) against a fake PX4 on 127.0.0.1: the issue's acceptance at the peer."""
+"""px4_bridge node in process (real rclpy) against a fake PX4 on 127.0.0.1: the issue's acceptance at the peer.
+
+Everything runs on simulation time (``use_sim_time``, as under the simulator): the test thread is the simulator.
+It advances the time by CLOCK_STEP (250 Hz of /clock, DESIGN.md §5), lets the fake PX4 send what is due then,
+publishes /clock, waits until the node's clock shows it and, at each control period, until the node's stream
+timer has run (so what it sent is on the fake's socket before time moves on), then publishes the controller's
+setpoint. Assertions are in simulation time; wall time only bounds waits (hang guards), it is never asserted on.
+The simulation starts at START_TIME: the node joins a simulation that already runs.
+"""
 
 import math
 import threading
@@ -12,6 +20,8 @@ from fpr_px4_bridge.px4_bridge_node import Px4BridgeNode  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.time import Time  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
 from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus  # noqa: E402
@@ -19,9 +29,14 @@ from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus  # noq
 Q_NORTH = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # w, x, y, z
 SETPOINT_TIMEOUT = 0.2
 STREAM_RATE = 50.0
+CLOCK_STEP_NS = 4_000_000  # /clock period [ns] (250 Hz)
+CONTROL_PERIOD_NS = 20_000_000  # the controller's and the stream timer's period [ns] (50 Hz)
+START_TIME = 10.0  # [s] simulation time when the node gets its first /clock
+WALL_LIMIT = 30.0  # [s] hang guard of every wait
 
 
-def wait_for(predicate, timeout=5.0, step=0.01):
+def wait_for(predicate, timeout=WALL_LIMIT, step=0.0002):
+    """Wall-clock wait (hang guard only), leaving the GIL to the executor thread."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if predicate():
@@ -30,12 +45,60 @@ def wait_for(predicate, timeout=5.0, step=0.01):
     return predicate()
 
 
+class SimTime:
+    """The test thread as the simulator (see the module doc); ``setpoint``: what the controller publishes."""
+
+    def __init__(self, node, fake, clock_pub, setpoint_pub, statuses) -> None:
+        self.node, self.fake, self.clock_pub, self.setpoint_pub = node, fake, clock_pub, setpoint_pub
+        self.statuses = statuses
+        self.ns = int(START_TIME * 1e9)
+        self.setpoint: AttitudeThrustSetpoint | None = None
+        self.last_publish: float | None = None  # [s] the controller's last setpoint
+        self.ticks: list[float] = []
+        tick = node.bridge.tick
+
+        def recorded_tick(now: float):
+            self.ticks.append(now)
+            return tick(now)
+
+        node.bridge.tick = recorded_tick  # observed, not changed: step() waits for each tick
+
+    @property
+    def now(self) -> float:
+        return self.ns * 1e-9
+
+    def step(self) -> None:
+        self.ns += CLOCK_STEP_NS
+        self.fake.emit_due()
+        stamp = Time(nanoseconds=self.ns)
+        self.clock_pub.publish(Clock(clock=stamp.to_msg()))
+        assert wait_for(lambda: self.node.get_clock().now().nanoseconds >= self.ns), f"node clock at {self.now}"
+        if self.ns % CONTROL_PERIOD_NS == 0:
+            assert wait_for(lambda: self.ticks and self.ticks[-1] >= self.now - 1e-6), f"tick at {self.now}"
+            if self.setpoint is not None:
+                self.setpoint_pub.publish(self.setpoint)
+                self.last_publish = self.now
+
+    def run_until(self, predicate, sim_timeout: float, what: str) -> float:
+        deadline = self.now + sim_timeout
+        while not predicate():
+            last = self.statuses[-1] if self.statuses else None
+            assert self.now < deadline, f"{what}: not within {sim_timeout} s of simulation (status {last})"
+            self.step()
+        return self.now
+
+    def run_for(self, duration: float) -> None:
+        end = self.now + duration - 1e-9
+        self.run_until(lambda: self.now >= end, duration + 1.0, f"{duration} s")
+
+
 @pytest.fixture
 def graph(fake_px4_factory, free_port):
     context = rclpy.Context()
     rclpy.init(context=context)
     port = free_port
-    node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=[
+    sim_time = [Parameter("use_sim_time", value=True)]
+    node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=sim_time + [
         Parameter("uav_id", value=1),
         Parameter("connection_url", value=f"udp://127.0.0.1:{port}"),
         Parameter("setpoint_timeout", value=SETPOINT_TIMEOUT),
@@ -43,27 +106,39 @@ def graph(fake_px4_factory, free_port):
         Parameter("offboard_warmup", value=1.0),
         Parameter("status_rate", value=20.0),
     ])
-    helper = rclpy.create_node("px4_bridge_test_helper", context=context)
+    helper = rclpy.create_node("px4_bridge_test_helper", context=context, parameter_overrides=sim_time)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     executor.add_node(helper)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinning = threading.Event()
+    spinning.set()
+
+    def spin() -> None:
+        while spinning.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
-    fake = fake_px4_factory(("127.0.0.1", port)).start()
+    clock = {"sim": None}
+    fake = fake_px4_factory(("127.0.0.1", port), clock=lambda: clock["sim"].now).start()
     qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    clock_pub = helper.create_publisher(Clock, "/clock", 10)
     setpoint_pub = helper.create_publisher(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", qos)
     teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", qos)
     statuses, imus = [], []
     helper.create_subscription(UavStatus, "/fpr/uav1/status", statuses.append, 10)
     helper.create_subscription(Imu, "/fpr/uav1/imu", imus.append, qos)
+    sim = clock["sim"] = SimTime(node, fake, clock_pub, setpoint_pub, statuses)
     assert wait_for(lambda: setpoint_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0
-                    and len(statuses) > 0)
-    yield node, fake, setpoint_pub, teleop_pub, statuses, imus
+                    and clock_pub.get_subscription_count() >= 2 and node.status_pub.get_subscription_count() > 0
+                    and node.imu_pub.get_subscription_count() > 0, timeout=10.0), "discovery"
+    yield node, fake, sim, teleop_pub, statuses, imus
+    spinning.clear()  # stop spinning before anything is destroyed (no callback on a destroyed handle)
+    spinner.join(timeout=5.0)
     executor.shutdown()
     node.destroy_node()
     helper.destroy_node()
     rclpy.shutdown(context=context)
-    spinner.join(timeout=2.0)
 
 
 def setpoint(q=Q_NORTH, thrust=10.0, uav_id=1):
@@ -80,90 +155,106 @@ def teleop(mode):
     return msg
 
 
+def test_mavlink_before_the_first_clock_is_dropped_and_stamps_are_simulation_time(graph):
+    node, fake, sim, teleop_pub, statuses, imus = graph
+    # the fake PX4 talks (HEARTBEAT, telemetry at time_boot_ms = 10 s) before the node has any /clock: with its
+    # clock at 0 it must not use them (they would put the boot-time offset 10 s off for the next 200 samples)
+    fake.emit_due()
+    assert wait_for(lambda: node.link.counters.rx_frames >= 5)
+    assert node.bridge.telemetry.mapper.offset is None and not node.bridge.machine.custom_mode_seen
+    sim.run_until(lambda: statuses and statuses[-1].connected and imus, 1.0, "connected")
+    # PX4's boot clock is the simulation clock here: offset ~0, IMU stamps are simulation times (a 50 ms grid)
+    assert -0.005 <= node.bridge.telemetry.mapper.offset <= 0.005
+    stamp = Time.from_msg(imus[-1].header.stamp).nanoseconds * 1e-9
+    assert sim.now - 0.1 <= stamp <= sim.now
+    assert stamp == pytest.approx(round(stamp / 0.05) * 0.05, abs=0.005)
+    status = statuses[-1]
+    assert Time.from_msg(status.header.stamp).nanoseconds * 1e-9 == pytest.approx(sim.now, abs=0.1)
+    assert status.state == UavStatus.STATE_IDLE and status.link_age <= 0.2  # HEARTBEAT at 10 Hz
+
+
 def test_fly_stream_rate_offboard_after_warmup_and_stale_stop(graph):
-    node, fake, setpoint_pub, teleop_pub, statuses, imus = graph
-    assert wait_for(lambda: statuses and statuses[-1].connected)
+    node, fake, sim, teleop_pub, statuses, imus = graph
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
     teleop_pub.publish(teleop(TeleopCommand.MODE_FLY))
-    assert wait_for(lambda: fake.armed, timeout=5.0)
-    # the controller publishes at 50 Hz for 2.5 s
-    end = time.monotonic() + 2.5
-    while time.monotonic() < end:
-        setpoint_pub.publish(setpoint())
-        time.sleep(0.02)
-    last_publish = time.monotonic()
-    assert wait_for(lambda: statuses[-1].offboard and statuses[-1].state == UavStatus.STATE_OFFBOARD, 3.0)
-    time.sleep(SETPOINT_TIMEOUT + 0.5)
-    times = np.array(fake.setpoint_times())
-    # >= 50 Hz at the peer over the whole stream
+    sim.run_until(lambda: fake.armed, 2.0, "armed")
+    # the controller publishes at 50 Hz (simulation time) for 2.5 s
+    sim.setpoint = setpoint()
+    sim.run_for(2.5)
+    sim.setpoint = None
+    last_publish = sim.last_publish
+    sim.run_until(lambda: statuses[-1].offboard and statuses[-1].state == UavStatus.STATE_OFFBOARD, 0.2, "OFFBOARD")
+    sim.run_for(SETPOINT_TIMEOUT + 1.5)
+    # the bridge's send times, from its own time_boot_ms (its boot: 0, it started before the first /clock)
+    with fake.lock:
+        times = np.array([r.msg.time_boot_ms * 1e-3 for r in fake.setpoints])
+    # >= 50 Hz at the peer over the whole stream (simulation time)
     span = times[-1] - times[0]
-    assert len(times) - 1 >= STREAM_RATE * span, (len(times), span)
-    # OFFBOARD requested only after >= 1 s of stream
+    assert span > 2.5 and len(times) - 1 >= STREAM_RATE * span, (len(times), span)
+    assert np.diff(times).max() <= 1.0 / STREAM_RATE + 0.0015  # no gap (1 ms: time_boot_ms resolution)
+    # OFFBOARD requested only after >= 1 s of stream (received at the peer, simulation time)
     set_modes = [c for c in fake.command_list() if c.msg.command == 176 and int(c.msg.param2) == 6]
     assert set_modes and set_modes[0].t - times[0] >= 1.0
-    # stale setpoints: the stream stops within setpoint_timeout + one period of the last forwarded setpoint
-    forwarded = times[times <= last_publish + 0.005]
-    assert times[-1] - forwarded[-1] <= SETPOINT_TIMEOUT + 1.0 / STREAM_RATE
-    assert wait_for(lambda: statuses[-1].failsafe and statuses[-1].state == UavStatus.STATE_FAILSAFE, 2.0)
+    # stale setpoints: the stream goes on for setpoint_timeout after the last published setpoint, then stops
+    stopped_after = times[-1] - last_publish
+    assert SETPOINT_TIMEOUT - 1.0 / STREAM_RATE - 0.0015 <= stopped_after <= SETPOINT_TIMEOUT + 1.0 / STREAM_RATE
+    sim.run_until(lambda: statuses[-1].failsafe and statuses[-1].state == UavStatus.STATE_FAILSAFE, 0.2, "failsafe")
     # wire content: level, facing north -> identity in NED/FRD; thrust normalized with the 12.0 V telemetry
     with fake.lock:
         last = fake.setpoints[-1].msg
     np.testing.assert_allclose(last.q, [1.0, 0.0, 0.0, 0.0], atol=1e-6)
     assert last.thrust == pytest.approx(10.0 / 34.58, abs=1e-5)
-    assert statuses[-1].setpoint_rate < STREAM_RATE  # stopped
+    assert statuses[-1].setpoint_rate == 0.0  # stopped more than 1 s ago
     # telemetry made it to ROS in ENU/FLU
     assert imus and imus[-1].linear_acceleration.z == pytest.approx(9.81, abs=1e-5)
     assert imus[-1].orientation.z == pytest.approx(math.sin(math.pi / 4), abs=1e-6)
 
 
 def test_bad_setpoints_never_reach_the_peer_and_garbage_is_counted(graph, corrupt_datagrams):
-    node, fake, setpoint_pub, teleop_pub, statuses, imus = graph
-    assert wait_for(lambda: statuses and statuses[-1].connected)
+    node, fake, sim, teleop_pub, statuses, imus = graph
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
     teleop_pub.publish(teleop(TeleopCommand.MODE_ARM))
-    assert wait_for(lambda: fake.armed)
+    sim.run_until(lambda: fake.armed, 2.0, "armed")
     for bad in (setpoint(q=(math.nan, 0.0, 0.0, 1.0)), setpoint(q=(0.5, 0.0, 0.0, 0.5)),
                 setpoint(thrust=math.inf), setpoint(uav_id=2)):
-        setpoint_pub.publish(bad)
-    assert wait_for(lambda: statuses[-1].rejected_setpoints == 4)
+        sim.setpoint_pub.publish(bad)
+    sim.run_until(lambda: statuses[-1].rejected_setpoints == 4, 1.0, "4 refused setpoints")
     assert fake.setpoint_times() == []
-    # streaming continues while 10,000 corrupted datagrams hit the bridge's socket
-    stop = threading.Event()
-
-    def controller():
-        while not stop.is_set():
-            setpoint_pub.publish(setpoint())
-            time.sleep(0.02)
-
-    thread = threading.Thread(target=controller, daemon=True)
-    thread.start()
-    try:
-        assert wait_for(lambda: len(fake.setpoint_times()) > 10)
-        for i, data in enumerate(corrupt_datagrams(10_000, seed=5)):
+    # streaming continues while 10,000 corrupted datagrams hit the bridge's socket (100 per clock step, each
+    # batch read before the next: a full socket buffer would drop datagrams, whatever the machine's speed)
+    sim.setpoint = setpoint()
+    sim.run_until(lambda: len(fake.setpoint_times()) > 10, 1.0, "stream")
+    datagrams = list(corrupt_datagrams(10_000, seed=5))
+    read_before = node.link.counters.rx_datagrams
+    for start in range(0, len(datagrams), 100):
+        for data in datagrams[start:start + 100]:
             fake.send_raw(data)
-            if i % 200 == 0:
-                time.sleep(0.002)
-        count = len(fake.setpoint_times())
-        assert wait_for(lambda: len(fake.setpoint_times()) > count + 20)
-        assert wait_for(lambda: statuses[-1].rx_garbage > 7000)
-        assert statuses[-1].connected and statuses[-1].state == UavStatus.STATE_WARMUP
-    finally:
-        stop.set()
-        thread.join()
+        sent = start + 100
+        assert wait_for(lambda: node.link.counters.rx_datagrams - read_before >= sent), "bridge reading"  # noqa: B023
+        sim.step()
+    count = len(fake.setpoint_times())
+    sim.run_until(lambda: len(fake.setpoint_times()) > count + 20, 1.0, "stream after the garbage")
+    sim.run_until(lambda: statuses[-1].rx_garbage > 7000, 2.0, "garbage counted")
+    assert statuses[-1].connected and statuses[-1].state == UavStatus.STATE_WARMUP
     with fake.lock:
         for received in fake.setpoints:
             assert np.isfinite(received.msg.q).all() and math.isfinite(received.msg.thrust)
 
 
 def test_kill_and_disconnect(graph):
-    node, fake, setpoint_pub, teleop_pub, statuses, imus = graph
-    assert wait_for(lambda: statuses and statuses[-1].connected)
+    node, fake, sim, teleop_pub, statuses, imus = graph
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
     teleop_pub.publish(teleop(TeleopCommand.MODE_ARM))
-    assert wait_for(lambda: fake.armed)
+    sim.run_until(lambda: fake.armed, 2.0, "armed")
     teleop_pub.publish(teleop(TeleopCommand.MODE_KILL))
-    assert wait_for(lambda: not fake.armed)
+    sim.run_until(lambda: not fake.armed, 1.0, "killed")
     kills = [c for c in fake.command_list() if c.msg.command == 400 and c.msg.param1 == 0.0]
     assert kills and kills[0].msg.param2 == 21196.0
-    assert wait_for(lambda: statuses[-1].state == UavStatus.STATE_KILLED)
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_KILLED, 0.5, "KILLED")
     fake.send_heartbeats = False
-    assert wait_for(lambda: statuses[-1].state == UavStatus.STATE_DISCONNECTED and not statuses[-1].connected,
-                    timeout=4.0)
+    silent_at = sim.now
+    lost_at = sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_DISCONNECTED
+                            and not statuses[-1].connected, 3.0, "DISCONNECTED")
+    # heartbeat_timeout 1.5 s after the last HEARTBEAT (10 Hz), seen in the next status (20 Hz)
+    assert 1.5 - 0.1 <= lost_at - silent_at <= 1.5 + 0.05 + 0.05
     assert statuses[-1].link_age >= 1.5
