@@ -1,0 +1,235 @@
+"""Launch-free integration (DESIGN.md §7): the whole simulated swarm in ONE process flies a scripted mission.
+
+simulator (lockstep, emulated cameras) + 3 × (px4_bridge, pose_estimator, controller in mode C) + teleop +
+joy_script playing config/joy_scripts/integration_flight.yaml: arm on the ground, fly, take off and climb 4 s at
+0.3 m/s, hold, roll +10°, hold, roll back, hold, descend 4 s at 0.3 m/s, land. The flight runs once (module
+fixture, ~31 s simulated); each test asserts flight METRICS from the ground truth against the commanded χ_d (the
+TeleopCommand the controllers received), never sleeps. Start scenario: config/scenarios/ground_start.yaml
+(resting on the ground, legs 60°, disarmed); the script first raises teleop's common leg angle from its 45°
+default to 60°.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from swarm_graph import SwarmGraph, SwarmOptions  # noqa: E402
+
+SCENARIO = "ground_start.yaml"  # resting on the ground, legs 60°, disarmed (hover.yaml: start in the air)
+JOY_SCRIPT = os.path.join(os.path.dirname(HERE), "src", "fpr_control", "config", "joy_scripts",
+                          "integration_flight.yaml")
+# Script times [s] (the timeline starts at the joy_script's first tick, ~0.02 s of simulation)
+LEGS_DEG = 60.0             # RB held 0-1.5 s: teleop's common leg angle 45° -> 60° (the resting robot's)
+CLIMB = (6.0, 10.0)         # left stick up: +0.3 m/s
+ROLL_UP = (12.0, 14.0)      # d-pad: +5°/s
+ROLL_DOWN = (17.0, 19.0)    # d-pad: −5°/s
+DESCEND = (22.0, 26.0)      # left stick down: −0.3 m/s
+LAND = 26.0                 # B: land
+END = 31.0                  # [s] simulated
+CLIMB_RATE = 0.3            # [m/s]
+# holds: from 1 s after a climb, 2 s after a roll ramp, to the next manoeuvre
+HOLD_WINDOWS = {"level": (11.0, 12.0), "roll 10 deg": (16.0, 17.0), "level again": (21.0, 22.0)}
+ANGLE_TOLERANCE = math.radians(3.0)  # platform roll/pitch vs command during holds
+LEG_TOLERANCE = math.radians(5.0)    # leg angles vs command during holds
+MAX_LOCKSTEP_TIMEOUTS = 5            # the first control periods wait for the bridges to start streaming
+
+
+def _interp(t, t_ref, values):
+    return np.interp(t, t_ref, values)
+
+
+def _window(arrays, start, end):
+    mask = (arrays["t"] >= start) & (arrays["t"] <= end)
+    assert mask.sum() >= 10, f"too few ground-truth samples in [{start}, {end}] s: {mask.sum()}"
+    return mask
+
+
+@pytest.fixture(scope="module")
+def flight():
+    wall_start = time.monotonic()
+    options = SwarmOptions(scenario=SCENARIO, joy_script=JOY_SCRIPT, controller_mode="communicating",
+                           emulated_cameras=True, real_time_factor=0.0)
+    with SwarmGraph(options) as swarm:
+        swarm.wait_for_discovery()
+        print(f"\n[swarm] {len(swarm.nodes)} nodes built and discovered in {time.monotonic() - wall_start:.1f} s",
+              flush=True)
+        stats = {"land_timeouts": None}
+
+        def progress() -> None:
+            truth = swarm.recorder.truth_arrays()
+            states = [s.state if s is not None else -1 for s in swarm.recorder.latest_status().values()]
+            if len(truth["t"]):
+                z, (roll, pitch, _) = truth["position"][-1, 2], np.degrees(truth["rpy"][-1])
+                legs = np.round(np.degrees(truth["legs"][-1]), 1).tolist()
+                print(f"[swarm] t={swarm.sim_time:5.1f} s  wall={time.monotonic() - wall_start:5.1f} s  z={z:.3f} m  "
+                      f"roll={roll:5.1f} pitch={pitch:5.1f} deg  legs={legs} deg  bridge states={states}  "
+                      f"lockstep timeouts={swarm.lockstep_timeouts}", flush=True)
+
+        run_start, sim_start = time.monotonic(), swarm.sim_time
+        swarm.run_until(lambda: swarm.sim_time >= LAND, wall_timeout=240.0, progress=progress)
+        stats["land_timeouts"] = swarm.lockstep_timeouts
+        swarm.run_until(lambda: swarm.sim_time >= END, wall_timeout=60.0, progress=progress)
+        wall = time.monotonic() - run_start
+        rtf = (swarm.sim_time - sim_start) / wall
+        print(f"[swarm] {swarm.sim_time:.1f} s simulated in {wall:.1f} s wall: real-time factor {rtf:.2f}; "
+              f"lockstep timeouts {swarm.lockstep_timeouts} ({stats['land_timeouts']} before the land command)",
+              flush=True)
+        recorder = swarm.recorder
+        record = {
+            "truth": recorder.truth_arrays(), "teleop": recorder.teleop_arrays(),
+            "status": {i: list(s) for i, s in recorder.status.items()},
+            "diagnostics": {i: list(d) for i, d in recorder.diagnostics.items()},
+            "local_state": {i: list(s) for i, s in recorder.local_state.items()},
+            "setpoints": {i: list(s) for i, s in recorder.setpoints.items()},
+            "n": swarm.n, "errors": list(swarm.errors), "timeouts_before_land": stats["land_timeouts"],
+            "timeouts": swarm.lockstep_timeouts, "rtf": rtf, "sim_time": swarm.sim_time,
+            "max_thrust": swarm.controllers[0].config.max_thrust,
+        }
+    yield record
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def _offboard_time(record) -> float:
+    """Simulation time at which the last bridge reported OFFBOARD."""
+    times = []
+    for i, statuses in record["status"].items():
+        reached = [_stamp(s) for s in statuses if s.state == 4]
+        assert reached, f"uav {i}: the bridge never reported OFFBOARD"
+        times.append(reached[0])
+    return max(times)
+
+
+def test_no_callback_errors_and_full_record(flight):
+    assert flight["errors"] == []
+    assert flight["sim_time"] >= END
+    assert len(flight["truth"]["t"]) > 50 * END  # 100 Hz ground truth
+    for i in range(1, flight["n"] + 1):
+        assert len(flight["setpoints"][i]) > 40 * LAND, f"uav {i}: setpoints missing"
+        assert len(flight["local_state"][i]) > 40 * LAND, f"uav {i}: local_state missing"
+
+
+def test_every_bridge_reaches_offboard_then_lands(flight):
+    offboard = _offboard_time(flight)
+    print(f"[swarm] all bridges OFFBOARD at t = {offboard:.2f} s")
+    assert offboard < CLIMB[0]
+    for i, statuses in flight["status"].items():
+        flying = [s for s in statuses if offboard + 0.5 <= _stamp(s) <= LAND]
+        assert flying and all(s.state == 4 and s.armed and not s.failsafe for s in flying), \
+            f"uav {i}: left OFFBOARD during the flight"
+        after_land = [s for s in statuses if _stamp(s) > LAND + 0.5]
+        assert after_land, f"uav {i}: no status after the land command"
+        assert all(s.mode_name == "AUTO.LAND" for s in after_land), f"uav {i}: PX4 not in AUTO.LAND"
+        assert any(s.state == 5 for s in after_land), f"uav {i}: the bridge never reported LANDING"
+        last = after_land[-1]
+        print(f"[swarm] uav {i}: at t = {_stamp(last):.1f} s bridge state {last.state}, armed {last.armed}")
+        assert last.state == 1 and not last.armed, f"uav {i}: not landed and disarmed at the end"
+
+
+def test_nothing_is_nan(flight):
+    truth = flight["truth"]
+    assert truth["finite"][truth["t"] <= LAND + 1.0].all(), "non-finite ground truth during the flight"
+    f_max = flight["max_thrust"]
+    for i in range(1, flight["n"] + 1):
+        for sp in flight["setpoints"][i]:
+            q = np.array([sp.attitude.w, sp.attitude.x, sp.attitude.y, sp.attitude.z])
+            assert np.isfinite(q).all() and abs(np.linalg.norm(q) - 1.0) < 1e-6, f"uav {i}: bad setpoint {sp}"
+            assert math.isfinite(sp.thrust) and 0.0 <= sp.thrust <= f_max, f"uav {i}: thrust {sp.thrust}"
+        for ls in flight["local_state"][i]:
+            values = [ls.leg_angle, ls.platform_roll, ls.platform_pitch, ls.relative_yaw, ls.uav_yaw,
+                      ls.uav_velocity_flat.x, ls.uav_velocity_flat.y, ls.uav_velocity_flat.z,
+                      ls.relative_pose.position.x, ls.relative_pose.position.y, ls.relative_pose.position.z]
+            assert all(math.isfinite(v) for v in values), f"uav {i}: non-finite local_state"
+        for d in flight["diagnostics"][i]:
+            assert not any(math.isnan(a) for a in d.info_ages) and math.isfinite(d.loop_time)
+
+
+def test_controllers_run_mode_c_without_fallback(flight):
+    start = _offboard_time(flight) + 0.5
+    for i, diagnostics in flight["diagnostics"].items():
+        flying = [d for d in diagnostics if start <= _stamp(d) <= LAND]
+        assert len(flying) > 40 * (LAND - start), f"uav {i}: diagnostics missing"
+        modes = {d.active_mode for d in flying}
+        fallbacks = sum(d.fallback_active for d in flying)
+        invalid = sum(not d.local_state_valid for d in flying)
+        worst_age = max(max(a for a in d.info_ages) for d in flying)
+        print(f"[swarm] uav {i}: active modes {modes}, fallback periods {fallbacks}, invalid local state {invalid}, "
+              f"oldest peer info {worst_age * 1000:.0f} ms")
+        assert modes == {1} and fallbacks == 0, f"uav {i}: modes {modes}, {fallbacks} fallback periods"
+        assert invalid == 0
+
+
+def test_lockstep_timeouts_stay_small(flight):
+    assert flight["timeouts_before_land"] <= MAX_LOCKSTEP_TIMEOUTS
+
+
+def test_takes_off_and_climbs_as_commanded(flight):
+    truth, teleop = flight["truth"], flight["teleop"]
+    z, t = truth["position"][:, 2], truth["t"]
+    resting = z[0]
+    armed_on_ground = _window(truth, CLIMB[0] - 1.0, CLIMB[0])  # armed, OFFBOARD, zero velocity command
+    steady = _window(truth, CLIMB[0] + 1.0, CLIMB[1])  # after lift-off and the teleop low-pass (τ = 0.3 s)
+    rate = np.polyfit(t[steady], z[steady], 1)[0]
+    commanded = _interp(t[steady], teleop["t"], teleop["velocity"][:, 2])
+    gain = float(z[t <= CLIMB[1] + 1.0][-1] - z[t <= CLIMB[0]][-1])
+    print(f"[swarm] resting z {resting:.3f} m, armed on the ground z {z[armed_on_ground].min():.3f}.."
+          f"{z[armed_on_ground].max():.3f} m; climb {rate:.3f} m/s (commanded {commanded.mean():.3f}), height "
+          f"gained {gain:.3f} m (ideal {CLIMB_RATE * (CLIMB[1] - CLIMB[0]):.2f})")
+    assert np.abs(z[armed_on_ground] - resting).max() < 0.05, "the robot jumps or sags when armed on the ground"
+    assert commanded.mean() == pytest.approx(CLIMB_RATE, abs=0.01)
+    assert rate == pytest.approx(CLIMB_RATE, abs=0.05)
+    assert gain == pytest.approx(CLIMB_RATE * (CLIMB[1] - CLIMB[0]), abs=0.2)
+
+
+def test_holds_track_roll_pitch_and_legs(flight):
+    truth, teleop = flight["truth"], flight["teleop"]
+    t = truth["t"]
+    for name, (start, end) in HOLD_WINDOWS.items():
+        mask = _window(truth, start, end)
+        roll_cmd = _interp(t[mask], teleop["t"], teleop["roll"])
+        pitch_cmd = _interp(t[mask], teleop["t"], teleop["pitch"])
+        roll_err = truth["rpy"][mask, 0] - roll_cmd
+        pitch_err = truth["rpy"][mask, 1] - pitch_cmd
+        leg_cmd = np.column_stack([_interp(t[mask], teleop["t"], teleop["legs"][:, k])
+                                   for k in range(flight["n"])])
+        leg_err = truth["legs"][mask] - leg_cmd
+        deg = np.degrees
+        print(f"[swarm] hold '{name}' [{start}, {end}] s: roll cmd {deg(roll_cmd.mean()):.1f} deg, "
+              f"error RMS {deg(np.sqrt(np.mean(roll_err ** 2))):.2f} max {deg(np.abs(roll_err).max()):.2f}; "
+              f"pitch error RMS {deg(np.sqrt(np.mean(pitch_err ** 2))):.2f} max {deg(np.abs(pitch_err).max()):.2f}; "
+              f"legs cmd {np.round(deg(leg_cmd.mean(axis=0)), 1).tolist()} error RMS "
+              f"{deg(np.sqrt(np.mean(leg_err ** 2))):.2f} max {deg(np.abs(leg_err).max()):.2f} deg")
+        assert np.abs(roll_err).max() <= ANGLE_TOLERANCE, f"{name}: roll error"
+        assert np.abs(pitch_err).max() <= ANGLE_TOLERANCE, f"{name}: pitch error"
+        assert np.abs(leg_err).max() <= LEG_TOLERANCE, f"{name}: leg angle error"
+    roll_hold = _window(truth, *HOLD_WINDOWS["roll 10 deg"])
+    assert np.degrees(teleop["legs"][-1]) == pytest.approx([LEGS_DEG] * flight["n"], abs=0.5)
+    assert np.degrees(truth["rpy"][roll_hold, 0].mean()) == pytest.approx(10.0, abs=2.0)
+
+
+def test_descends_and_lands(flight):
+    truth = flight["truth"]
+    z, t = truth["position"][:, 2], truth["t"]
+    steady = _window(truth, DESCEND[0] + 1.0, DESCEND[1])
+    rate = np.polyfit(t[steady], z[steady], 1)[0]
+    z_land = z[t <= LAND][-1]
+    after = _window(truth, LAND + 0.5, END)
+    rest = _window(truth, END - 0.5, END)
+    print(f"[swarm] descent {rate:.3f} m/s (commanded {-CLIMB_RATE}); after LAND: z {z_land:.3f} -> "
+          f"{z[after].min():.3f} m, at rest z {z[rest].mean():.3f} m, legs "
+          f"{np.round(np.degrees(truth['legs'][rest][-1]), 1).tolist()} deg, speed "
+          f"{np.abs(truth['velocity'][rest]).max():.3f} m/s")
+    assert rate == pytest.approx(-CLIMB_RATE, abs=0.05)
+    assert z_land - z[after].min() > 0.1, "the platform does not descend after the land command"
+    assert np.abs(truth["velocity"][rest]).max() < 0.05, "not at rest on the ground at the end"
+    assert truth["finite"].all()
