@@ -86,6 +86,10 @@ def main(args=None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
     finally:
         if node is not None:
             node.device.close()
