@@ -6,6 +6,14 @@ desired contact force f^d_c (N, (3.43)). Each channel goes through: dead zone ->
 integrated rate) -> clamping to its limits -> first-order low-pass ``τ ẏ = x − y``. The filter output is χ_d
 and its derivative ``(x − y)/τ`` is χ̇_d (4.25)-(4.26).
 
+Start from the robot (``start_from_robot``): while the robot is not flying (modes IDLE and ARM, before FLY),
+the configuration channels do not take the operator's input: roll and pitch stay at their configured initial
+values (0: the robot rests level) and the common leg angle follows the robot's measured one (the mean of the
+UAVs' reported θ_i, :mod:`fpr_control.teleop_start`), each with the filter state set to the target, so
+χ̇_d = 0 there. Once FLY is engaged the operator's inputs take over from those values (same channel modes).
+Without a measured leg angle the leg channel keeps the configured initial value (or the last measured one)
+and the operator's input as before.
+
 The exact gamepad layout of the thesis Fig. 4.5 is lost in the text extraction; the default layout lives in
 ``config/teleop.yaml`` and is documented there. No rclpy in this module.
 """
@@ -25,6 +33,14 @@ MODE_NAMES = {MODE_IDLE: "idle", MODE_ARM: "arm", MODE_FLY: "fly", MODE_LAND: "l
 CHANNELS = ("velocity_x", "velocity_y", "velocity_z", "yaw_rate", "roll", "pitch", "leg_angle", "contact_force")
 #: Channels zeroed when the joystick falls silent (the others hold their value).
 RATE_CHANNELS = ("velocity_x", "velocity_y", "velocity_z", "yaw_rate")
+#: Configuration channels held at the robot's resting configuration before FLY (``start_from_robot``).
+ATTITUDE_CHANNELS = ("roll", "pitch")
+#: Modes in which the robot is not flown by the controllers: the start configuration is tracked there.
+GROUND_MODES = (MODE_IDLE, MODE_ARM)
+#: Where the common leg-angle command came from (:attr:`TeleopFilter.leg_source`).
+LEG_SOURCE_CONFIGURED = "configured initial value"
+LEG_SOURCE_INFO = "mean of the UAVs' reported leg angles (/fpr/info)"
+LEG_SOURCE_INFO_STALE = "last mean of the UAVs' reported leg angles (/fpr/info now stale)"
 
 
 @dataclass(frozen=True)
@@ -122,12 +138,19 @@ def apply_dead_zone(value: float, dead_zone: float) -> float:
 class TeleopFilter:
     """Joy arrays -> :class:`TeleopOutput`. Call :meth:`joy` for each Joy message and :meth:`step` at the
     publishing rate (50 Hz). ``leg_range`` (optional) returns the feasible (min, max) leg angle [rad] for the
-    current roll and pitch; the commanded leg angle is clamped into it in addition to the static limits."""
+    current roll and pitch; the commanded leg angle is clamped into it in addition to the static limits.
+    ``start_from_robot``: before FLY, hold roll/pitch at their initial values and follow the measured leg
+    angle given to :meth:`step` (module doc)."""
 
     def __init__(self, config: TeleopConfig,
-                 leg_range: Callable[[float, float], tuple[float, float]] | None = None) -> None:
+                 leg_range: Callable[[float, float], tuple[float, float]] | None = None,
+                 start_from_robot: bool = False) -> None:
         self.config = config
         self.leg_range = leg_range
+        self.start_from_robot = start_from_robot
+        #: origin of the current leg-angle target (LEG_SOURCE_*), as of the last step before FLY
+        self.leg_source = LEG_SOURCE_CONFIGURED
+        self._reports: list[str] = []
         self._targets = {name: config.channels[name].initial for name in CHANNELS}
         self._filtered = dict(self._targets)
         self._axes = np.zeros(config.expected_axes)
@@ -202,14 +225,26 @@ class TeleopFilter:
                     low, high = new_low, new_high
         return low, high
 
-    def step(self, t: float, dt: float) -> TeleopOutput:
-        """Advance targets and filters by dt [s] at time t [s] and return χ_d, χ̇_d."""
+    def step(self, t: float, dt: float, measured_leg_angle: float | None = None) -> TeleopOutput:
+        """Advance targets and filters by dt [s] at time t [s] and return χ_d, χ̇_d (4.25)-(4.26).
+        ``measured_leg_angle`` [rad]: the robot's current common leg angle (None: unknown), used before FLY
+        when ``start_from_robot`` is set; non-finite values count as unknown."""
+        previous_mode = self.mode
         self._update_mode()
         stale = self.joy_stale(t)
+        on_ground = self.start_from_robot and self.mode in GROUND_MODES
+        if measured_leg_angle is not None and not math.isfinite(measured_leg_angle):
+            measured_leg_angle = None
+        follow_legs = on_ground and measured_leg_angle is not None
+        held = ATTITUDE_CHANNELS + ("leg_angle",) if follow_legs else ATTITUDE_CHANNELS
         for name in CHANNELS:
             channel = self.config.channels[name]
             u = 0.0 if stale else self._channel_input(channel)
-            if channel.mode == "absolute":
+            if on_ground and name in ATTITUDE_CHANNELS:
+                target = channel.initial  # the robot rests level (configured initial: 0)
+            elif follow_legs and name == "leg_angle":
+                target = measured_leg_angle
+            elif channel.mode == "absolute":
                 if stale and name not in RATE_CHANNELS:
                     target = self._targets[name]  # hold the last value
                 else:
@@ -222,8 +257,17 @@ class TeleopFilter:
         alpha = 1.0 - math.exp(-dt / tau) if dt > 0.0 else 0.0
         rates = {}
         for name in CHANNELS:
-            self._filtered[name] += alpha * (self._targets[name] - self._filtered[name])
+            if on_ground and name in held:
+                self._filtered[name] = self._targets[name]  # start configuration: χ_d = target, χ̇_d = 0
+            else:
+                self._filtered[name] += alpha * (self._targets[name] - self._filtered[name])
             rates[name] = (self._targets[name] - self._filtered[name]) / tau
+        if on_ground:
+            self._update_leg_source(follow_legs)
+        if self.mode == MODE_FLY and previous_mode in GROUND_MODES:
+            source = self.leg_source if self.start_from_robot else "initial_legs_from_info off"
+            self._reports.append(f"FLY: common leg angle starts at {math.degrees(self._targets['leg_angle']):.1f} "
+                                 f"deg ({source})")
         f, n = self._filtered, self.config.n
         return TeleopOutput(
             mode=self.mode,
@@ -240,6 +284,23 @@ class TeleopFilter:
             contact_force=f["contact_force"],
             joy_stale=stale,
         )
+
+    def _update_leg_source(self, followed: bool) -> None:
+        if followed:
+            source = LEG_SOURCE_INFO
+        elif self.leg_source == LEG_SOURCE_CONFIGURED:
+            source = LEG_SOURCE_CONFIGURED
+        else:
+            source = LEG_SOURCE_INFO_STALE
+        if source != self.leg_source:
+            self._reports.append(f"leg angle command: {source}, "
+                                 f"{math.degrees(self._targets['leg_angle']):.1f} deg")
+            self.leg_source = source
+
+    def take_reports(self) -> list[str]:
+        """One-off notices since the last call (the leg-angle source changed; FLY engaged from it), for a log."""
+        reports, self._reports = self._reports, []
+        return reports
 
     @property
     def targets(self) -> dict[str, float]:

@@ -1,7 +1,9 @@
 """teleop node (ground station): sensor_msgs/Joy on ``joy`` -> fpr_msgs/TeleopCommand on /fpr/teleop at 50 Hz.
 
 The mapping (Fig. 4.5 layout, dead zones, low-pass, limits) is config/teleop.yaml, read through the
-``mapping_file`` parameter; the core is :class:`fpr_control.teleop_filter.TeleopFilter`.
+``mapping_file`` parameter; the core is :class:`fpr_control.teleop_filter.TeleopFilter`. With
+``initial_legs_from_info`` (default), before FLY the command starts from the robot's configuration: the mean
+of the leg angles the UAVs report on /fpr/info (:mod:`fpr_control.teleop_start`), roll and pitch 0.
 
     ros2 run fpr_control teleop --ros-args -p n:=3
 """
@@ -20,7 +22,8 @@ from sensor_msgs.msg import Joy
 
 from fpr_control.node_utils import LOG_THROTTLE_S, describe
 from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
-from fpr_msgs.msg import TeleopCommand
+from fpr_control.teleop_start import ReportedLegAngles, ReportedLegAnglesConfig
+from fpr_msgs.msg import InformationVector, TeleopCommand
 
 
 def default_mapping_file() -> str:
@@ -45,6 +48,13 @@ class TeleopNode(Node):
         )).value)
         self.min_force_margin = float(d("min_force_margin", 2.0, describe("[N] feasibility threshold")).value)
         self.min_moment_margin = float(d("min_moment_margin", 1.0, describe("[N m] feasibility threshold")).value)
+        legs_from_info = bool(d("initial_legs_from_info", True, describe(
+            "before FLY, follow the mean of the UAVs' leg angles on /fpr/info (roll/pitch at 0), so arming "
+            "commands no configuration change; false: start from the mapping's initial values")).value)
+        info_timeout = float(d("info_timeout", 0.5, describe(
+            "[s] an /fpr/info leg angle older than this is not used")).value)
+        info_smoothing = float(d("info_smoothing", 1.0, describe(
+            "[s] time constant of the average of the reported leg angles (0: none)")).value)
         path = mapping_file or default_mapping_file()
         with open(path, encoding="utf-8") as stream:
             config = config_from_dict(yaml.safe_load(stream), n=n)
@@ -62,16 +72,22 @@ class TeleopNode(Node):
                     raise ValueError("no feasible leg angle at this orientation")
                 return result
 
-        self.filter = TeleopFilter(config, leg_range)
+        self.filter = TeleopFilter(config, leg_range, start_from_robot=legs_from_info)
+        self.reported_legs: ReportedLegAngles | None = None
         joy_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(Joy, "joy", self._on_joy, joy_qos)
+        if legs_from_info:
+            self.reported_legs = ReportedLegAngles(ReportedLegAnglesConfig(n, info_timeout, info_smoothing))
+            self.create_subscription(InformationVector, "/fpr/info", self._on_info, QoSProfile(
+                depth=20, reliability=ReliabilityPolicy.BEST_EFFORT))  # as the controllers
         self.pub = self.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         self._last_tick: float | None = None
         self._last_mode = self.filter.mode
         self._was_stale = True
         self.create_timer(1.0 / self.rate, self._on_tick)
         self.get_logger().info(f"teleop: mapping {path}, {self.rate:.0f} Hz, n = {n}, "
-                               f"feasible leg range {'on' if use_feasibility else 'off'}")
+                               f"feasible leg range {'on' if use_feasibility else 'off'}, initial legs "
+                               f"{'from /fpr/info' if legs_from_info else 'from the mapping'}")
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -81,11 +97,19 @@ class TeleopNode(Node):
         if reason is not None:
             self.get_logger().warning(f"Joy ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 
+    def _on_info(self, msg: InformationVector) -> None:
+        reason = self.reported_legs.receive(int(msg.uav_id), msg.leg_angle, bool(msg.valid), self._now())
+        if reason is not None:
+            self.get_logger().warning(f"/fpr/info ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+
     def _on_tick(self) -> None:
         now = self._now()
         dt = 1.0 / self.rate if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.5)
         self._last_tick = now
-        out = self.filter.step(now, dt)
+        measured = self.reported_legs.update(now, dt) if self.reported_legs is not None else None
+        out = self.filter.step(now, dt, measured.leg_angle if measured is not None else None)
+        for report in self.filter.take_reports():
+            self.get_logger().info(report)
         if out.joy_stale and not self._was_stale:
             self.get_logger().warning("joystick silent: zero velocities, holding roll/pitch/legs/force")
         self._was_stale = out.joy_stale
@@ -120,6 +144,10 @@ def main(args=None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
     finally:
         if node is not None:
             node.destroy_node()

@@ -162,7 +162,7 @@ def test_teleop_node_maps_joy_and_ignores_bad_joy():
         timer = helper.create_timer(0.02, publish)
         assert wait_for(lambda: commands[-1].platform_velocity.x > 0.49, timeout=5.0)  # v_x = 0.5 after the LPF
         c = commands[-1]
-        assert len(c.leg_angles) == 3 and c.leg_angles[0] == pytest.approx(math.radians(45.0))
+        assert len(c.leg_angles) == 3 and c.leg_angles[0] == pytest.approx(math.radians(60.0))  # no /fpr/info
         assert c.mode == TeleopCommand.MODE_IDLE
         state["axes"] = [float("nan")] * 8  # ignored: the last good sample holds
         time.sleep(0.2)
