@@ -1,7 +1,11 @@
-"""fpr_sim benchmarks: physics real-time factor (n = 3, 1 kHz, no ROS), render time per image, and the simulator
-core with a scripted MAVLink setpoint client in lockstep (UDP on 127.0.0.1: run via scripts/isolated.sh).
+"""fpr_sim benchmarks: physics real-time factor (n = 3, 1 kHz, no ROS) for both plant implementations (the
+pure-Python reference and the compiled C kernel of fpr_sim._kernels), render time per image, and the simulator
+core with 3 scripted MAVLink setpoint clients in lockstep (UDP on 127.0.0.1: run via scripts/isolated.sh).
 
     bash scripts/isolated.sh python benchmarks/bench_sim.py
+
+The compiled kernel must have been built (scripts/setup.sh / colcon build); otherwise only the Python figures
+are printed.
 """
 
 from __future__ import annotations
@@ -19,31 +23,60 @@ os.environ["MAVLINK20"] = "1"
 
 import numpy as np  # noqa: E402
 from fpr_model.dynamics import forward_dynamics, gravity, thrusts_from_wrench  # noqa: E402
+from fpr_sim._kernels import KERNEL_ENV, kernel_status  # noqa: E402
 from fpr_sim.cameras import CameraRig  # noqa: E402
 from fpr_sim.plant import Plant  # noqa: E402
+from fpr_sim.quadrotor import AttitudeCommand  # noqa: E402
 from fpr_sim.scenario import CameraConfig, scenario_from_dict  # noqa: E402
 from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
 from fpr_sim.structure import StructureDynamics  # noqa: E402
 
+KERNELS = ("python", "compiled") if kernel_status().available else ("python",)
 
-def bench_physics(seconds: float = 3.0) -> None:
-    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
-                                   "ground": {"enabled": False}})
-    plant = Plant(scenario)
+#: the step-time cases: hovering (no ground), hovering in wind + gust, resting armed on the ground
+PHYSICS_CASES = {
+    "hover": {"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True}, "ground": {"enabled": False}},
+    "wind": {"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True}, "ground": {"enabled": False},
+             "wind": {"velocity": [1.0, 0.5, 0.0], "gusts": [{"start": 0.5, "duration": 2.0,
+                                                              "velocity": [0.0, 1.0, 0.0]}]}},
+    "on_ground": {"initial_state": {"mode": "ground", "leg_angles": 1.0}},
+}
+
+
+def _hovering_plant(case: str, kernel: str) -> Plant:
+    plant = Plant(scenario_from_dict(PHYSICS_CASES[case]), kernel=kernel)
     q = plant.state.configuration()
     forces = thrusts_from_wrench(plant.params, q, gravity(plant.params, q))
-    from fpr_sim.quadrotor import AttitudeCommand
+    if case == "on_ground":  # armed on the ground at 30 % of the hover thrust
+        u = 0.3 * np.linalg.norm(forces, axis=1) / plant.fleet.max_thrust()
+        quats = plant.default_uav_attitudes()
+    else:
+        u = np.linalg.norm(forces, axis=1) / plant.fleet.max_thrust()
+        quats = plant.default_uav_attitudes(forces)
+    plant.set_command(AttitudeCommand(quats, u, np.ones(plant.n, dtype=bool)))
+    return plant
 
-    u = np.linalg.norm(forces, axis=1) / plant.fleet.max_thrust()
-    plant.set_command(AttitudeCommand(plant.default_uav_attitudes(forces), u, np.ones(3, dtype=bool)))
-    steps = int(seconds * 1000)
-    start = time.perf_counter()
-    for _ in range(steps):
-        plant.step()
-    wall = time.perf_counter() - start
-    print(f"plant step (n=3, 1 kHz, RK4 structure + RK4 quadrotors, PX4 loop 250 Hz): "
-          f"{1e6 * wall / steps:.1f} us/step, real-time factor {seconds / wall:.2f}x")
-    sd = plant.structure
+
+def step_time(case: str, kernel: str, steps: int = 1000, repeats: int = 3) -> float:
+    """Best of ``repeats`` × ``steps`` plant steps [s per step]."""
+    plant = _hovering_plant(case, kernel)
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(steps):
+            plant.step()
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best
+
+
+def bench_physics() -> None:
+    print(f"compiled kernel: {kernel_status().reason}")
+    for case in PHYSICS_CASES:
+        times = {kernel: step_time(case, kernel) for kernel in KERNELS}
+        text = ", ".join(f"{kernel} {1e6 * t:.1f} us/step (RTF {1e-3 / t:.1f}x)" for kernel, t in times.items())
+        ratio = f", compiled/python speed-up {times['python'] / times['compiled']:.1f}x" if len(times) == 2 else ""
+        print(f"plant step n=3 1 kHz [{case}]: {text}{ratio}")
+    plant = _hovering_plant("hover", "python")
     state = plant.state
     xi = np.concatenate([state.velocity, state.rate, state.leg_rates]).tolist()
     c = np.cos(state.leg_angles).tolist()
@@ -51,20 +84,25 @@ def bench_physics(seconds: float = 3.0) -> None:
     g = [0.0, 0.0, -9.81]
     qf = [0.0] * 9
     reps = 5000
-    start = time.perf_counter()
-    for _ in range(reps):
-        sd.accelerate(c, s, xi, g, qf)
-    fast = (time.perf_counter() - start) / reps
+    calls = {}
+    for kernel in KERNELS:
+        sd = StructureDynamics(plant.params, kernel=kernel)
+        start = time.perf_counter()
+        for _ in range(reps):
+            sd.accelerate(c, s, xi, g, qf)
+        calls[kernel] = (time.perf_counter() - start) / reps
+    q = state.configuration()
     nu = state.generalized_velocity()
     reps_ref = 500
     start = time.perf_counter()
     for _ in range(reps_ref):
         forward_dynamics(plant.params, q, nu, qf)
     ref = (time.perf_counter() - start) / reps_ref
-    print(f"structure forward dynamics (StructureDynamics.accelerate): {1e6 * fast:.1f} us/call vs "
-          f"fpr_model.forward_dynamics {1e6 * ref:.1f} us/call ({ref / fast:.1f}x)")
+    text = ", ".join(f"{kernel} {1e6 * t:.1f} us/call" for kernel, t in calls.items())
+    print(f"structure forward dynamics (StructureDynamics.accelerate, incl. the ctypes call): {text}; "
+          f"fpr_model.forward_dynamics {1e6 * ref:.1f} us/call")
     start = time.perf_counter()
-    StructureDynamics(plant.params)
+    StructureDynamics(plant.params, kernel="python")
     print(f"per-parameter basis fit: {1e3 * (time.perf_counter() - start):.1f} ms once")
 
 
@@ -87,14 +125,19 @@ def bench_render(frames: int = 200) -> None:
           f"(noise 2 + blur 0.5)")
 
 
-def bench_lockstep(seconds: float = 3.0) -> None:
+def bench_lockstep(kernel: str, seconds: float = 3.0) -> None:
     from fpr_model.frames import quat_enu_flu_to_ned_frd
     from pymavlink import mavutil
 
     scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
                                    "ground": {"enabled": False}, "cameras": {"enabled": False}})
-    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=True,
-                                                 lockstep_timeout=0.5))
+    os.environ[KERNEL_ENV] = kernel  # the Simulation builds its Plant with the default selection
+    try:
+        sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=True,
+                                                     lockstep_timeout=0.5))
+    finally:
+        del os.environ[KERNEL_ENV]
+    assert sim.plant.kernel == kernel
     targets = [(e.quat_local.copy(), e.thrust) for e in sim.emulators]
     stop = threading.Event()
 
@@ -123,8 +166,8 @@ def bench_lockstep(seconds: float = 3.0) -> None:
     stop.set()
     for thread in threads:
         thread.join()
-    print(f"simulator core, lockstep, 3 scripted MAVLink clients (no ROS, no cameras): real-time factor "
-          f"{seconds / wall:.2f}x, lockstep timeouts {sim.lockstep_timeouts}, setpoints "
+    print(f"simulator core [{kernel}], lockstep, 3 scripted MAVLink clients (no ROS, no cameras): real-time "
+          f"factor {seconds / wall:.2f}x, lockstep timeouts {sim.lockstep_timeouts}, setpoints "
           f"{[e.counters.setpoints for e in sim.emulators]}")
     sim.close()
 
@@ -132,4 +175,5 @@ def bench_lockstep(seconds: float = 3.0) -> None:
 if __name__ == "__main__":
     bench_physics()
     bench_render()
-    bench_lockstep()
+    for kernel_name in KERNELS:
+        bench_lockstep(kernel_name)

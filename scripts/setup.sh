@@ -50,7 +50,7 @@ fi
 # the set of files or any manifest, message, CMake or config file changes.
 src_hash=$(cd "$ROOT" && { find src colcon.meta -type f -not -path '*/__pycache__/*' -not -name '*.pyc' | LC_ALL=C sort;
   find src colcon.meta -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
-    -o -name '*.msg' -o -name '*.yaml' -o -name colcon.meta \) -print0 | LC_ALL=C sort -z | xargs -0 cat; } | sha256sum | cut -d' ' -f1)
+    -o -name '*.msg' -o -name '*.yaml' -o -name '*.c' -o -name colcon.meta \) -print0 | LC_ALL=C sort -z | xargs -0 cat; } | sha256sum | cut -d' ' -f1)
 if [[ "$(cat "$ROOT/install/.fpr-build" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/install/setup.bash" ]]; then
   say "colcon build --symlink-install (log: log/setup/colcon.log)"
   (

@@ -20,6 +20,11 @@ touches the ground), which freezes their integrators as PX4 does.
 The structure state is integrated in platform-body velocities ξ = [R_pᵀ v_p, ω_p, θ̇]; ν (2.2) is derived.
 The 1 kHz loop runs on plain Python floats (numpy costs ~1 µs per call on 3-vectors); its results are checked
 against frozen trajectories of the former numpy implementation in test/test_plant_oracle.py (to 1e-10).
+
+Two implementations of steps 1-3 (``Plant.kernel``): this module (the reference, :meth:`Plant._advance`) and
+the optional compiled kernel of :mod:`fpr_sim._kernels` (a C port of the same code, ~7× faster), selected by
+``Plant(..., kernel=)`` or ``$FPR_SIM_KERNEL`` (auto | compiled | python; auto uses the compiled kernel when it
+was built). Both replay the same frozen trajectories.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from fpr_model.parameters import FprParameters, default_parameters, parameters_from_dict
 
+from fpr_sim._kernels import PlantKernel, resolve_kernel
 from fpr_sim.environment import Environment
 from fpr_sim.quadrotor import AttitudeCommand, QuadrotorFleet
 from fpr_sim.scalar_math import rotation_entries
@@ -75,15 +81,19 @@ class GroundTruth:
 class Plant:
     """The whole simulated robot (see the module doc). Time ``t`` in s starts at 0."""
 
-    def __init__(self, scenario: Scenario, dt: float = 1e-3, params: FprParameters | None = None) -> None:
+    def __init__(self, scenario: Scenario, dt: float = 1e-3, params: FprParameters | None = None,
+                 kernel: str | None = None) -> None:
         self.scenario = scenario
+        #: 'compiled' (the C kernel of fpr_sim._kernels runs the step) or 'python' (this module, the reference);
+        #: requested by ``kernel`` = 'auto' | 'compiled' | 'python' (None: $FPR_SIM_KERNEL, default 'auto')
+        self.kernel = resolve_kernel(kernel, scenario.n)
         self.params = params if params is not None else true_parameters(scenario)
         if self.params.n != scenario.n:
             raise ValueError(f"plant parameters have n = {self.params.n}, scenario n = {scenario.n}")
         self.n = scenario.n
         self.dt = float(dt)
-        self.structure = StructureDynamics(self.params)
-        self.fleet = QuadrotorFleet(self.n, scenario.quadrotor, scenario.px4, scenario.battery)
+        self.structure = StructureDynamics(self.params, kernel=self.kernel)
+        self.fleet = QuadrotorFleet(self.n, scenario.quadrotor, scenario.px4, scenario.battery, kernel=self.kernel)
         self.environment = Environment(scenario)
         self.gear = float(scenario.quadrotor.landing_gear_height)
         self.uav_masses = np.array(self.params.uav_masses)
@@ -119,6 +129,7 @@ class Plant:
         self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * self.n
         self._yaw_anchors = [math.nan] * self.n  # landing-gear yaw friction anchors [rad] (NaN: not touching)
         self.reset_to_initial_state()
+        self._compiled = PlantKernel(self) if self.kernel == "compiled" else None
 
     # ---------------------------------------------------------------------------------------------- state
     def _set_x(self, x: list[float]) -> None:
@@ -388,9 +399,8 @@ class Plant:
         self.command = command
 
     def step(self) -> None:
-        """Advance the plant by one fixed step ``dt`` (see the module doc)."""
-        n = self.n
-        dt = self.dt
+        """Advance the plant by one fixed step ``dt`` (see the module doc): the scheduling here, the physics in
+        :meth:`_advance` (Python reference) or in the compiled kernel (same equations, fpr_sim._kernels)."""
         env = self.environment
         fleet = self.fleet
         if self.time >= self._next_control - 1e-12:
@@ -402,6 +412,25 @@ class Plant:
         payload = env.payload_mass(self.time)
         if payload != self.structure.payload_mass:
             self.structure.set_payload_mass(payload)
+        self._wind_list = env.wind_velocity(self.time).tolist() if env.has_wind else None
+        if self.scenario.external_wrenches:
+            force, moment = env.platform_wrench(self.time)
+            self._platform_force_list = force.tolist()
+            self._platform_moment_list = moment.tolist()
+        else:
+            self._platform_force_list = self._platform_moment_list = (0.0, 0.0, 0.0)
+        # the compiled kernel declines only a singular mass matrix: the reference then raises as it always did
+        if self._compiled is None or not self._compiled.advance(self):
+            self._advance()
+        self.time = (self.steps + 1) * self.dt
+        self.steps += 1
+
+    def _advance(self) -> None:
+        """The physics of one step after the scheduling of :meth:`step` (pure-Python reference)."""
+        n = self.n
+        dt = self.dt
+        env = self.environment
+        fleet = self.fleet
         x = self._x_list
         if self._tips is None:
             self._tips = self._tip_kinematics_list(x)
@@ -413,13 +442,6 @@ class Plant:
             self._ground_active = (min(p[2] for p in tip_pos) - self.gear < ground_cfg.height + margin
                                    or x[2] < ground_cfg.height + margin)
         self._anchor_list = env.ground.anchors.tolist()
-        self._wind_list = env.wind_velocity(self.time).tolist() if env.has_wind else None
-        if self.scenario.external_wrenches:
-            force, moment = env.platform_wrench(self.time)
-            self._platform_force_list = force.tolist()
-            self._platform_moment_list = moment.tolist()
-        else:
-            self._platform_force_list = self._platform_moment_list = (0.0, 0.0, 0.0)
         self._stage_contact = 0.0
         thrust = fleet.thrust_vectors_list()
         # classical RK4 on the structure state (thrusts held over the step)
@@ -480,8 +502,6 @@ class Plant:
             fleet.battery.update(fleet.thrust(), dt)
         else:
             fleet.step(dt, body_moments)
-        self.time = (self.steps + 1) * dt
-        self.steps += 1
 
     def uav_landed(self) -> list[bool]:
         """Per quadrotor: its landing gear touches the ground (a ground anchor is set). This is what PX4's land

@@ -28,6 +28,7 @@ import numpy as np
 from fpr_model.battery import ThrustCoefficients
 from fpr_model.rotations import quat_error
 
+from fpr_sim._kernels import QuadKernel, resolve_kernel
 from fpr_sim.scenario import BatteryConfig, Px4Config, QuadrotorConfig, per_uav
 
 __all__ = ["AttitudeCommand", "Battery", "QuadrotorFleet", "mix"]
@@ -170,8 +171,13 @@ class QuadrotorFleet:
     1 kHz loop; reading one returns a numpy copy, assigning one replaces it.
     """
 
-    def __init__(self, n: int, quad: QuadrotorConfig, px4: Px4Config, battery: BatteryConfig) -> None:
+    def __init__(self, n: int, quad: QuadrotorConfig, px4: Px4Config, battery: BatteryConfig,
+                 kernel: str | None = None) -> None:
         self.n = n
+        #: 'compiled' (control and step run in fpr_sim._kernels' C kernel, which reads the constants below once,
+        #: here) or 'python' (this module, the reference); ``kernel`` = 'auto' | 'compiled' | 'python'
+        #: (None: $FPR_SIM_KERNEL, default 'auto')
+        self.kernel = resolve_kernel(kernel, n)
         self.inertia = np.array(quad.inertia, dtype=float)  # diagonal (3,)
         if self.inertia.shape != (3,) or (self.inertia <= 0).any():
             raise ValueError(f"quadrotor.inertia: expected 3 positive diagonal values, got {quad.inertia}")
@@ -196,6 +202,7 @@ class QuadrotorFleet:
         self.previous_rate = np.zeros((n, 3))
         self.rate_setpoint = np.zeros((n, 3))
         self.f_max = self.max_thrust()
+        self._compiled = QuadKernel(self) if self.kernel == "compiled" else None
 
     quat = property(lambda self: np.array(self._quat), lambda self, value: setattr(self, "_quat", _rows(value)))
     rate = property(lambda self: np.array(self._rate), lambda self, value: setattr(self, "_rate", _rows(value)))
@@ -250,7 +257,20 @@ class QuadrotorFleet:
         ``q_err = q⁻¹ ∘ q_d`` (fpr_model.rotations.quat_error), ``m = K_P ε + K_I ∫ε − K_D ω̇`` (3.40; integral
         reset while disarmed, frozen while ``landed[i]`` (PX4 RateControl::update(..., landed): no integration
         against the ground) and clamped to ``|K_I ∫ε| ≤ limit``), rotor commands by :func:`mix_one` (3.41)
-        from ``f_t = clip(u_f, 0, 1)·f_max(V)``; zero while disarmed. ``landed`` (n,) defaults to all False."""
+        from ``f_t = clip(u_f, 0, 1)·f_max(V)``; zero while disarmed. ``landed`` (n,) defaults to all False.
+        Runs in the compiled kernel when selected (plain (n, ·) commands of finite attitudes; anything else,
+        and the errors it raises, go through the Python reference :meth:`control_python`)."""
+        if self._compiled is not None:
+            self.f_max = self.max_thrust()
+            rates = self._rate if measured_rate is None else _rows(measured_rate)
+            on_ground = [False] * self.n if landed is None else [bool(v) for v in landed]
+            if len(on_ground) == self.n and self._compiled.control(self, command, rates, on_ground):
+                return
+        self.control_python(command, measured_rate, landed)
+
+    def control_python(self, command: AttitudeCommand, measured_rate: np.ndarray | None = None,
+                       landed: list[bool] | None = None) -> None:
+        """:meth:`control` in Python (the reference)."""
         dt = self.controller_period
         on_ground = [False] * self.n if landed is None else [bool(v) for v in landed]
         rates = self._rate if measured_rate is None else _rows(measured_rate)
@@ -304,7 +324,16 @@ class QuadrotorFleet:
         Plain floats per vehicle. The motor lag ``Ṫ = (T_cmd − T)/τ_m`` is linear with a held command, so its
         RK4 stage values are evaluated in closed form: with ``e = T_cmd − T_0`` and ``a = dt/τ_m`` the stage
         slopes are ``k_s = β_s e/τ_m``, ``β = [1, 1 − a/2, 1 − a/2 + a²/4, 1 − a + a²/2 − a³/4]``, identical to
-        stepping the 4 rotor states through the 4 stages; the rotor moments of each stage follow linearly."""
+        stepping the 4 rotor states through the 4 stages; the rotor moments of each stage follow linearly.
+        Runs in the compiled kernel when selected, else :meth:`step_python`."""
+        if self._compiled is not None:
+            moments = body_moment if isinstance(body_moment, list) else _rows(body_moment)
+            self._compiled.step(self, dt, moments)
+            return
+        self.step_python(dt, body_moment)
+
+    def step_python(self, dt: float, body_moment) -> None:
+        """:meth:`step` in Python (the reference)."""
         moments = body_moment if isinstance(body_moment, list) else _rows(body_moment)
         i0, i1, i2 = self._inertia
         arm = self.arm

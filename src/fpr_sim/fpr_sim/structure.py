@@ -32,6 +32,8 @@ from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_rotmat
 from scipy.linalg.lapack import dposv as _cholesky_solve
 
+from fpr_sim._kernels import StructureKernel, resolve_kernel
+
 __all__ = ["PointForces", "StructureDynamics", "StructureState"]
 
 #: Leg angle at which the other legs sit while one leg's mass-matrix dependence is fitted [rad].
@@ -100,9 +102,12 @@ class PointForces:
 class StructureDynamics:
     """Fast forward dynamics of the passive structure for one (true) parameter set. See the module doc."""
 
-    def __init__(self, params: FprParameters, payload_mass: float = 0.0) -> None:
+    def __init__(self, params: FprParameters, payload_mass: float = 0.0, kernel: str | None = None) -> None:
         self.params = params
         self.n = params.n
+        #: 'compiled' (accelerate runs in fpr_sim._kernels' C kernel) or 'python' (the reference below);
+        #: ``kernel`` = 'auto' | 'compiled' | 'python' (None: $FPR_SIM_KERNEL, default 'auto')
+        self.kernel = resolve_kernel(kernel, params.n)
         constants = model_constants(params)
         self.anchors = np.array(constants.anchors)  # a_i in Fp (n, 3)
         self.joint_axes = np.array(constants.joint_axes)  # k_i in Fp (n, 3)
@@ -113,6 +118,7 @@ class StructureDynamics:
         self._base_basis, self._leg_basis, self.fit_residual = _fit_mass_matrix_basis(params)
         self.payload_mass = 0.0
         self.set_payload_mass(payload_mass)
+        self._compiled = StructureKernel(self) if self.kernel == "compiled" else None
 
     # ----------------------------------------------------------------------------------------------
     def set_payload_mass(self, mass: float) -> None:
@@ -199,7 +205,17 @@ class StructureDynamics:
 
     def accelerate(self, c: list[float], s: list[float], xi: list[float], g_body: list[float],
                    q_force: list[float]) -> list[float]:
-        """The 1 kHz kernel of :meth:`body_acceleration` on plain floats (lists), few numpy calls.
+        """The 1 kHz kernel of :meth:`body_acceleration` on plain floats (lists): the compiled kernel (same
+        equations, fpr_sim._kernels) when selected, else :meth:`accelerate_python`. Arguments: see there."""
+        if self._compiled is not None:
+            result = self._compiled.accelerate(self, c, s, xi, g_body, q_force)
+            if result is not None:  # None: singular M̃, the reference raises as it always did
+                return result
+        return self.accelerate_python(c, s, xi, g_body, q_force)
+
+    def accelerate_python(self, c: list[float], s: list[float], xi: list[float], g_body: list[float],
+                          q_force: list[float]) -> list[float]:
+        """The 1 kHz kernel of :meth:`body_acceleration` on plain floats (lists), few numpy calls (reference).
 
         ``c``, ``s``: cos θ_i, sin θ_i; ``xi`` = [u, ω, θ̇] (6+n); ``g_body`` = R_pᵀ g_vec (3); ``q_force`` Q̃ (6+n).
         Returns ξ̇ (6+n). Same equations as the module doc: M̃ from the fitted basis (one matmul), the rows

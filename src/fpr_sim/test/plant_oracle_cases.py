@@ -65,8 +65,10 @@ CASES = [
 ]
 
 
-def run_case(case: OracleCase) -> dict[str, np.ndarray]:
-    """Run one case on the current plant; samples every RECORD_EVERY steps (and the initial state)."""
+def run_case(case: OracleCase, kernel: str | None = None) -> dict[str, np.ndarray]:
+    """Run one case on the current plant; samples every RECORD_EVERY steps (and the initial state).
+
+    ``kernel``: the plant's kernel ('python' | 'compiled' | 'auto'; None: $FPR_SIM_KERNEL, see fpr_sim._kernels)."""
     from fpr_model.dynamics import gravity, thrusts_from_wrench
     from fpr_model.rotations import quat_from_axis_angle, quat_multiply
     from fpr_sim.plant import Plant
@@ -74,7 +76,7 @@ def run_case(case: OracleCase) -> dict[str, np.ndarray]:
     from fpr_sim.scenario import scenario_from_dict
 
     scenario = scenario_from_dict(case.scenario)
-    plant = Plant(scenario)
+    plant = Plant(scenario, kernel=kernel)
     plant.ideal_attitude = case.ideal
     n = plant.n
     q = plant.state.configuration()

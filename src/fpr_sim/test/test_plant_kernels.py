@@ -1,12 +1,41 @@
-"""The plain-float kernels of the 1 kHz plant against their numpy / fpr_model definitions."""
+"""The kernels of the 1 kHz plant: the plain-float Python ones against their numpy / fpr_model definitions, and
+the optional compiled kernel (fpr_sim._kernels, C) against the Python reference, its build and its selection.
+
+The fixture ``kernel`` runs a test on both implementations; the compiled one fails (does not skip) when a C
+compiler exists but the kernel is not available (a silently broken build must be seen).
+"""
+
+import hashlib
+import logging
 
 import numpy as np
 import pytest
-from fpr_model.rotations import quat_normalize, quat_to_rotmat
+from fpr_model.rotations import quat_from_axis_angle, quat_multiply, quat_normalize, quat_to_rotmat
+from fpr_sim._kernels import KERNEL_ENV, compiler_available, kernel_status, resolve_kernel
 from fpr_sim.environment import Environment
-from fpr_sim.quadrotor import Battery, QuadrotorFleet, mix
+from fpr_sim.plant import Plant
+from fpr_sim.quadrotor import AttitudeCommand, Battery, QuadrotorFleet, mix
 from fpr_sim.scalar_math import rotation_entries
 from fpr_sim.scenario import scenario_from_dict
+from fpr_sim.structure import StructureDynamics
+
+from fpr_model import parameters
+from fpr_sim import _kernels
+
+
+def _require_compiled() -> None:
+    if not kernel_status().available:
+        if compiler_available():
+            pytest.fail(f"a C compiler exists but the compiled kernel is unavailable: {kernel_status().reason}")
+        pytest.skip("no C compiler on this machine: the compiled kernel cannot be built")
+
+
+@pytest.fixture(params=["python", "compiled"])
+def kernel(request) -> str:
+    """The implementation under test."""
+    if request.param == "compiled":
+        _require_compiled()
+    return request.param
 
 
 def test_rotation_entries_are_fpr_model_rotmat():
@@ -47,9 +76,10 @@ def test_board_force_scalar_matches_array_version():
         assert np.allclose(force_s, force, atol=1e-12)
 
 
-def test_fleet_state_reads_copies_and_battery_accepts_lists():
+def test_fleet_state_reads_copies_and_battery_accepts_lists(kernel):
     scenario = scenario_from_dict({})
-    fleet = QuadrotorFleet(3, scenario.quadrotor, scenario.px4, scenario.battery)
+    fleet = QuadrotorFleet(3, scenario.quadrotor, scenario.px4, scenario.battery, kernel=kernel)
+    assert fleet.kernel == kernel
     quat = fleet.quat
     quat[0, 0] = 5.0  # a copy: the fleet is unchanged
     assert fleet.quat[0, 0] == 1.0
@@ -73,3 +103,222 @@ def test_mix_rows_match_the_allocation_inverse():
         assert 0.17 * (t[1] - t[3]) == pytest.approx(m[0])
         assert 0.17 * (t[2] - t[0]) == pytest.approx(m[1])
         assert 0.016 * (-t[0] + t[1] - t[2] + t[3]) == pytest.approx(m[2])
+
+
+# ------------------------------------------------------------------------------------------- compiled kernel
+
+
+def test_compiled_kernel_is_built_and_selected_wherever_a_c_compiler_exists(monkeypatch):
+    """Not a skip when the build is broken: with a compiler on the machine the library must load, be fresh
+    (built from this plant_kernel.c) and be what a default plant uses."""
+    if not compiler_available():
+        pytest.skip("no C compiler on this machine")
+    status = kernel_status()
+    assert status.available, status.reason
+    built_from = _kernels._library().lib.fpr_kernel_source_hash().decode()
+    assert built_from == hashlib.sha256(_kernels._SOURCE.read_bytes()).hexdigest()
+    monkeypatch.delenv(KERNEL_ENV, raising=False)
+    plant = Plant(scenario_from_dict({}))
+    assert (plant.kernel, plant.structure.kernel, plant.fleet.kernel) == ("compiled",) * 3
+    assert plant._compiled is not None and plant.fleet._compiled is not None
+
+
+def test_kernel_selection_by_argument_and_environment(monkeypatch):
+    monkeypatch.setenv(KERNEL_ENV, "python")
+    assert resolve_kernel() == "python"
+    plant = Plant(scenario_from_dict({}))
+    assert (plant.kernel, plant.structure.kernel, plant.fleet.kernel) == ("python",) * 3
+    assert plant._compiled is None and plant.fleet._compiled is None and plant.structure._compiled is None
+    monkeypatch.setenv(KERNEL_ENV, "fast")
+    with pytest.raises(ValueError, match="auto, compiled, python"):
+        Plant(scenario_from_dict({}))
+    with pytest.raises(ValueError, match="valid choices"):
+        resolve_kernel("numba")
+    monkeypatch.setenv(KERNEL_ENV, " Auto ")
+    assert resolve_kernel() == ("compiled" if kernel_status().available else "python")
+    assert resolve_kernel("python") == "python"  # the argument wins over the environment
+    if kernel_status().available:  # a robot larger than the kernel's arrays: Python, or an error if insisted
+        too_many = _kernels._library().max_legs + 1
+        assert resolve_kernel("auto", too_many) == "python"
+        with pytest.raises(RuntimeError, match="exceeds"):
+            resolve_kernel("compiled", too_many)
+
+
+def test_missing_library_falls_back_to_python_with_one_info_line(monkeypatch, caplog):
+    monkeypatch.delenv(KERNEL_ENV, raising=False)
+    monkeypatch.setattr(_kernels, "_library_path", lambda: None)
+    monkeypatch.setattr(_kernels, "_announced", False)
+    _kernels._load.cache_clear()
+    try:
+        with caplog.at_level(logging.INFO, logger="fpr_sim.kernels"):
+            plant = Plant(scenario_from_dict({}))
+            Plant(scenario_from_dict({}), kernel="auto")
+        records = [r for r in caplog.records if r.name == "fpr_sim.kernels"]
+        assert [r.levelno for r in records] == [logging.INFO]
+        assert "pure-Python plant" in records[0].getMessage() and "not built" in records[0].getMessage()
+        assert (plant.kernel, plant.structure.kernel, plant.fleet.kernel) == ("python",) * 3
+        plant.step()
+        assert plant.steps == 1
+        with pytest.raises(RuntimeError, match="requested but unavailable"):
+            Plant(scenario_from_dict({}), kernel="compiled")
+    finally:
+        _kernels._load.cache_clear()
+
+
+def test_stale_library_is_refused(monkeypatch, tmp_path, caplog):
+    _require_compiled()
+    edited = tmp_path / "plant_kernel.c"
+    edited.write_bytes(_kernels._SOURCE.read_bytes() + b"/* edited after the build */\n")
+    monkeypatch.setattr(_kernels, "_SOURCE", edited)
+    _kernels._load.cache_clear()
+    try:
+        with caplog.at_level(logging.WARNING, logger="fpr_sim.kernels"):
+            status = kernel_status()
+        assert not status.available and "stale" in status.reason
+        assert any("stale" in r.getMessage() for r in caplog.records)
+    finally:
+        _kernels._load.cache_clear()
+
+
+def _random_accelerate_inputs(rng, n):
+    angles = rng.uniform(0.2, 1.4, n)
+    return (np.cos(angles).tolist(), np.sin(angles).tolist(), rng.normal(0.0, 1.0, 6 + n).tolist(),
+            rng.normal(0.0, 5.0, 3).tolist(), rng.normal(0.0, 2.0, 6 + n).tolist())
+
+
+@pytest.mark.parametrize("n", [3, 4, 6])
+def test_compiled_structure_acceleration_matches_the_reference(n):
+    _require_compiled()
+    params = parameters.parameters_from_dict({"n": n})
+    fast = StructureDynamics(params, payload_mass=0.25, kernel="compiled")
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        inputs = _random_accelerate_inputs(rng, n)
+        expected = fast.accelerate_python(*inputs)
+        assert np.allclose(fast.accelerate(*inputs), expected, rtol=1e-12, atol=1e-12)
+    fast.set_payload_mass(0.0)  # a new basis: the kernel follows it
+    inputs = _random_accelerate_inputs(rng, n)
+    assert np.allclose(fast.accelerate(*inputs), fast.accelerate_python(*inputs), rtol=1e-12, atol=1e-12)
+
+
+def test_structure_acceleration_solves_indefinite_and_refuses_singular_mass_matrices(kernel):
+    """Outside the physical (positive definite) case both implementations fall back to a general solve, and
+    both raise numpy's LinAlgError for a singular matrix."""
+    fast = StructureDynamics(parameters.default_parameters(), kernel=kernel)
+    inputs = _random_accelerate_inputs(np.random.default_rng(7), 3)
+    reference = StructureDynamics(parameters.default_parameters(), kernel="python")
+    indefinite = fast._basis.copy()  # the leg terms kept, the constant part made indefinite
+    indefinite[0] = np.diag(np.linspace(-2.0, 3.0, 9) + 0.05).ravel()
+    fast._basis = reference._basis = indefinite
+    assert np.linalg.eigvalsh(reference.body_mass_matrix(np.arctan2(inputs[1], inputs[0]))).min() < 0.0
+    assert np.allclose(fast.accelerate(*inputs), reference.accelerate(*inputs), rtol=1e-12, atol=1e-12)
+    fast._basis = np.zeros_like(indefinite)
+    fast._leg_basis_stack = np.zeros_like(fast._leg_basis_stack)
+    with pytest.raises(np.linalg.LinAlgError):
+        fast.accelerate(*inputs)
+
+
+def _fleets(n=3, kernels=("python", "compiled")):
+    scenario = scenario_from_dict({"n": n})
+    return [QuadrotorFleet(n, scenario.quadrotor, scenario.px4, scenario.battery, kernel=k) for k in kernels]
+
+
+def _fleet_state(fleet) -> np.ndarray:
+    return np.concatenate([fleet.quat.ravel(), fleet.rate.ravel(), fleet.rotors.ravel(),
+                           fleet.rotor_commands.ravel(), fleet.rate_integral.ravel(), fleet.previous_rate.ravel(),
+                           fleet.rate_setpoint.ravel(), fleet.battery.charge_used, fleet.battery.current])
+
+
+def test_compiled_controller_and_quadrotor_step_match_the_reference():
+    """PX4 attitude P / rate PID / airmode-off mixer (saturating commands, disarmed and landed vehicles, rate
+    feed-forward, NaN thrust) and the RK4 of (2.92) with motors and battery, compiled vs Python."""
+    _require_compiled()
+    n = 4
+    rng = np.random.default_rng(11)
+    python, compiled = _fleets(n)
+    for fleet in (python, compiled):
+        fleet.hover_rotor_state(np.full(n, 12.0))
+    for k in range(200):
+        if k % 4 == 0:
+            tilt = rng.normal(0.0, 0.6 if k % 40 == 0 else 0.1, (n, 3))
+            quats = np.array([quat_multiply(quat_from_axis_angle(t / np.linalg.norm(t), np.linalg.norm(t)),
+                                            python.quat[i]) for i, t in enumerate(tilt)])
+            thrust = rng.uniform(0.0, 1.2, n)
+            thrust[rng.integers(n)] = np.nan if k % 20 == 0 else thrust[0]
+            armed = rng.uniform(size=n) > 0.15
+            feedforward = rng.normal(0.0, 0.5, (n, 3)) if k % 8 == 0 else None
+            landed = (rng.uniform(size=n) > 0.7).tolist()
+            command = AttitudeCommand(quats, thrust, armed, feedforward)
+            for fleet in (python, compiled):
+                fleet.control(command, landed=landed)
+            assert np.allclose(_fleet_state(compiled), _fleet_state(python), rtol=1e-12, atol=1e-12)
+        moments = rng.normal(0.0, 0.05, (n, 3))
+        for fleet in (python, compiled):
+            fleet.step(1e-3, moments)
+        assert np.allclose(_fleet_state(compiled), _fleet_state(python), rtol=1e-11, atol=1e-12), k
+    assert np.ptp(python.rotors) > 1.0 and np.abs(python.rate).max() > 0.1  # it did move
+
+
+def test_controller_refuses_bad_attitudes_alike(kernel):
+    """A NaN or zero attitude raises fpr_model's ValueError on both paths; a single (4,) target is broadcast."""
+    fleet, reference = _fleets(kernels=(kernel, "python"))
+    target = quat_normalize(np.array([0.99, 0.05, -0.03, 0.1]))
+    for f in (fleet, reference):
+        f.control(AttitudeCommand(target, np.full(3, 0.5), np.ones(3, dtype=bool)))
+    assert np.allclose(fleet.rotor_commands, reference.rotor_commands, rtol=1e-12)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        fleet.control(AttitudeCommand(np.full((3, 4), np.nan), np.full(3, 0.5), np.ones(3, dtype=bool)))
+    fleet.quat = np.zeros((3, 4))
+    with pytest.raises(ValueError, match="zero quaternion"):
+        fleet.control(AttitudeCommand(np.tile(target, (3, 1)), np.full(3, 0.5), np.ones(3, dtype=bool)))
+
+
+_STEP_SCENARIOS = {
+    "on_ground_armed_wind": {"initial_state": {"mode": "ground", "leg_angles": 0.9},
+                             "wind": {"velocity": [0.5, -0.3, 0.0]}},
+    "hover_wrench_payload": {"n": 4, "initial_state": {"mode": "hover", "leg_angles": 0.8},
+                             "ground": {"enabled": False},
+                             "payloads": [{"mass": 0.2, "attach_time": 0.01, "release_time": 0.08}],
+                             "external_wrenches": [{"start": 0.0, "end": 0.05, "force": [0.3, 0.0, -0.5],
+                                                    "moment": [0.0, 0.01, 0.0]}]},
+    "board_contact": {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
+                      "board": {"enabled": True, "point": [0.0, 0.0, 1.5], "normal": [0.1, 0.0, -1.0]}},
+}
+
+
+@pytest.mark.parametrize("name", sorted(_STEP_SCENARIOS))
+def test_compiled_plant_step_matches_the_reference_from_disturbed_states(name):
+    """Randomly disturbed states (sliding feet and yaw friction on the ground, board impact, wrench and
+    payload switching, ideal attitudes for a while): 150 steps of both implementations side by side."""
+    _require_compiled()
+    rng = np.random.default_rng(len(name))
+    plants = [Plant(scenario_from_dict(_STEP_SCENARIOS[name]), kernel=k) for k in ("python", "compiled")]
+    state = plants[0].state
+    state.velocity = rng.normal(0.0, 0.3, 3)
+    state.rate = rng.normal(0.0, 0.5, 3)
+    state.leg_rates = rng.normal(0.0, 0.5, plants[0].n)
+    rates = rng.normal(0.0, 1.0, (plants[0].n, 3))
+    n = plants[0].n
+    command = AttitudeCommand(plants[0].fleet.quat, np.full(n, 0.45), np.ones(n, dtype=bool),
+                              rng.normal(0.0, 0.3, (n, 3)))
+    for plant in plants:
+        plant.set_state(state)
+        plant.fleet.rate = rates
+        plant.set_command(command)
+    for k in range(150):
+        for plant in plants:
+            plant.ideal_attitude = 60 <= k < 70
+            plant.step()
+        python, compiled = plants
+        for a, b in ((python._x, compiled._x), (_fleet_state(python.fleet), _fleet_state(compiled.fleet)),
+                     (python._tip_acceleration, compiled._tip_acceleration)):
+            assert np.allclose(b, a, rtol=1e-9, atol=1e-9), k
+        assert np.array_equal(np.isnan(python.environment.ground.anchors),
+                              np.isnan(compiled.environment.ground.anchors))
+        assert np.allclose(compiled.environment.ground.anchors, python.environment.ground.anchors, atol=1e-9,
+                           equal_nan=True)
+        assert np.allclose(compiled._yaw_anchors, python._yaw_anchors, atol=1e-9, equal_nan=True)
+        assert compiled._contact_force == pytest.approx(python._contact_force, abs=1e-7)
+        assert compiled._ground_active == python._ground_active
+    truth = [p.ground_truth() for p in plants]
+    assert np.allclose(truth[1].external_wrench, truth[0].external_wrench, atol=1e-8)

@@ -18,6 +18,10 @@ History of data/plant_oracle.npz (regenerate ONLY after a deliberate change of t
    This changes the joint-offset moment (2.93) and hence every flying case. Same change: the default rate-loop
    integral gains to PX4's I/P ratio (rate_i_gain 0.2 -> 1.2 on roll/pitch, 0.1 -> 0.6 on yaw).
 
+Both implementations of the plant replay the same frozen reference: the pure-Python one (the reference code)
+and the optional compiled kernel (fpr_sim._kernels, C): ``kernel`` is parametrized. The compiled variant fails
+(does not skip) when a C compiler exists but the kernel is missing, so a broken build cannot pass unseen.
+
 What it pins now: every kernel of the 1 kHz loop (structure RK4, ground and board contact, wind, payload, the
 PX4 loops and mixer, motors, battery) through closed-loop runs of 1.5-2 s; agreement to ~1e-10 (rounding only,
 amplified by the loops; the specific forces are a finite difference over dt, hence the looser bound).
@@ -26,11 +30,13 @@ amplified by the loops; the specific forces are a finite difference over dt, hen
 
 import dataclasses
 import importlib.util
+import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from fpr_sim._kernels import kernel_status
 
 _SPEC = importlib.util.spec_from_file_location("plant_oracle_cases", Path(__file__).with_name("plant_oracle_cases.py"))
 cases = importlib.util.module_from_spec(_SPEC)
@@ -45,6 +51,16 @@ DEFAULT_TOLERANCE = 1e-10
 @pytest.fixture(scope="module")
 def reference():
     return np.load(cases.DATA)
+
+
+@pytest.fixture(params=["python", "compiled"])
+def kernel(request) -> str:
+    """The plant implementation under test; 'compiled' must be available wherever a C compiler is."""
+    if request.param == "compiled" and not kernel_status().available:
+        if shutil.which("cc") or shutil.which("gcc"):
+            pytest.fail(f"a C compiler exists but the compiled kernel is unavailable: {kernel_status().reason}")
+        pytest.skip("no C compiler on this machine: the compiled kernel cannot be built")
+    return request.param
 
 
 def _mismatches(name: str, result: dict, reference) -> list[str]:
@@ -68,16 +84,16 @@ def _mismatches(name: str, result: dict, reference) -> list[str]:
 
 
 @pytest.mark.parametrize("case", cases.CASES, ids=lambda c: c.name)
-def test_plant_matches_frozen_reference(case, reference):
-    assert _mismatches(case.name, cases.run_case(case), reference) == []
+def test_plant_matches_frozen_reference(case, reference, kernel):
+    assert _mismatches(case.name, cases.run_case(case, kernel=kernel), reference) == []
 
 
-def test_oracle_detects_a_small_physics_change(reference):
+def test_oracle_detects_a_small_physics_change(reference, kernel):
     """The comparison is sensitive: a 0.1 % longer motor time constant is caught (rotors, attitudes, state)."""
     case = next(c for c in cases.CASES if c.name == "ground_takeoff")
     quadrotor = dict(case.scenario.get("quadrotor", {}), motor_time_constant=0.008 * 1.001)
     perturbed = dataclasses.replace(case, scenario=dict(case.scenario, quadrotor=quadrotor))
-    mismatches = _mismatches(case.name, cases.run_case(perturbed), reference)
+    mismatches = _mismatches(case.name, cases.run_case(perturbed, kernel=kernel), reference)
     assert any("/rotors" in m for m in mismatches) and any("/x" in m for m in mismatches), mismatches
 
 
