@@ -12,8 +12,13 @@ parameters of its package's config YAML (``--params-file`` is per process, so th
 All nodes but the simulator spin in one SingleThreadedExecutor in a background thread; the simulation is
 stepped by :meth:`SwarmGraph.run_until` in the caller's thread, one ``/clock`` period (4 ms) at a time, so
 the caller can stop on a condition of the recorded data. With ``lockstep`` (default) the simulator waits at
-every 20 ms boundary for each streaming UAV's setpoint, which the controllers compute on the ``/clock`` just
-published: results do not depend on the machine's speed (up to the ordering of same-instant callbacks).
+every 20 ms boundary for each streaming UAV's setpoint computed for that period (the bridges put the setpoint's
+stamp in SET_ATTITUDE_TARGET.time_boot_ms, so their repetitions of an older setpoint do not count, see
+fpr_sim.simulation), which the controllers compute on the ``/clock`` just published: the controllers' inputs are
+at most one control period old and results do not depend on the machine's speed (up to the ordering of
+same-instant callbacks). No per-period wait in this helper (the multi-process run gets the same lockstep);
+only a backpressure (``max_graph_lag``) keeps the simulation from running seconds ahead of the graph while
+nothing streams.
 
 Usage::
 
@@ -104,11 +109,11 @@ class SwarmOptions:
     real_time_factor: float = 0.0  #: 0 = lockstep as fast as possible
     lockstep: bool = True
     lockstep_timeout: float = 0.5  #: [s] wall
-    #: graph lockstep: at every control boundary t, also wait (up to lockstep_timeout, wall) until every
-    #: controller has published its setpoint for t. The simulator's own lockstep counts any SET_ATTITUDE_TARGET,
-    #: including the bridges' 50 Hz repetitions of an older setpoint, so without this a loaded machine lets the
-    #: simulation run ahead of the ROS graph (stale estimates and setpoints, see the report in the test).
-    graph_lockstep: bool = True
+    #: [s] simulated: the stepping thread never runs further than this ahead of the graph's clock (the recorder's
+    #: /clock). The simulator's lockstep holds it only while setpoint streams are live; before arming and after
+    #: landing the one executor would otherwise pile up a backlog that the lockstep must then wait off (timeouts).
+    #: Not a per-period wait: with live streams the graph is within one control period anyway. inf: off.
+    max_graph_lag: float = 0.1
     #: extra parameters per node kind: "simulator", "px4_bridge", "pose_estimator", "aruco_detector",
     #: "controller", "teleop", "joy_script" (applied last)
     overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -186,6 +191,22 @@ class SwarmRecorder(Node):
         finite = np.array([_finite_fpr_state(m) for m in msgs], dtype=bool)
         return {"t": t, "position": pos, "rpy": rpy, "legs": legs, "thrusts": thrusts, "velocity": velocity,
                 "finite": finite}
+
+    def local_state_ages(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Per UAV: the control instants t_d (diagnostics stamps) [s] and, at each, the age [s] of the newest
+        local_state stamped at or before t_d, i.e. how old the controller's estimate is at best (NaN: none yet)."""
+        with self.lock:
+            diagnostics = {i: np.array([_t(m.header.stamp) for m in d]) for i, d in self.diagnostics.items()}
+            local = {i: np.array(sorted(_t(m.header.stamp) for m in s)) for i, s in self.local_state.items()}
+        ages = {}
+        for i, t_d in diagnostics.items():
+            stamps = local[i]
+            if not len(stamps):
+                ages[i] = (t_d, np.full(len(t_d), np.nan))
+                continue
+            k = np.searchsorted(stamps, t_d + 1e-9) - 1
+            ages[i] = (t_d, np.where(k >= 0, t_d - stamps[np.maximum(k, 0)], np.nan))
+        return ages
 
     def teleop_arrays(self) -> dict[str, np.ndarray]:
         """Commanded χ_d: t, mode, velocity (N,3), roll, pitch, legs (N,n)."""
@@ -273,22 +294,6 @@ def build_ground_nodes(context, options: SwarmOptions, n: int) -> tuple[Node, No
 
 
 # ------------------------------------------------------------------------------------------------ the graph
-class _StampedPublisher:
-    """Wraps a node's publisher to remember the header stamp [s] of the last message it published (the graph
-    lockstep below waits on it); everything else is delegated."""
-
-    def __init__(self, publisher) -> None:
-        self._publisher = publisher
-        self.last_stamp = -math.inf
-
-    def publish(self, msg) -> None:
-        self._publisher.publish(msg)
-        self.last_stamp = _t(msg.header.stamp)
-
-    def __getattr__(self, name: str):
-        return getattr(self._publisher, name)
-
-
 class SwarmGraph:
     """See the module doc. A context manager: ``close()`` destroys every node and shuts the context down."""
 
@@ -298,7 +303,6 @@ class SwarmGraph:
         rclpy.init(context=self.context)
         self.nodes: list[Node] = []
         self.errors: list[str] = []  #: exceptions raised in callbacks (the graph keeps running)
-        self.graph_timeouts = 0  #: control boundaries at which a controller's setpoint did not come in time
         self._running = True
         self._executor: SingleThreadedExecutor | None = None
         self._spinner: threading.Thread | None = None
@@ -329,7 +333,6 @@ class SwarmGraph:
             uav = build_uav_nodes(ctx, o, i, n)
             for node in uav.nodes:
                 self._add(node)
-            uav.controller.setpoint_pub = _StampedPublisher(uav.controller.setpoint_pub)
             self.bridges.append(uav.bridge)
             self.estimators.append(uav.estimator)
             self.controllers.append(uav.controller)
@@ -400,14 +403,17 @@ class SwarmGraph:
     def lockstep_timeouts(self) -> int:
         return self.simulator.sim.lockstep_timeouts
 
-    def _wait_for_controllers(self, boundary: float) -> None:
-        """Graph lockstep: every controller has published its setpoint stamped >= ``boundary`` (or timeout)."""
-        deadline = time.monotonic() + self.options.lockstep_timeout
-        while any(c.setpoint_pub.last_stamp < boundary - 1e-6 for c in self.controllers):
-            if time.monotonic() > deadline:
-                self.graph_timeouts += 1
-                return
-            time.sleep(0.0002)
+    def setpoint_latency_max(self, start: float = 0.0, end: float = math.inf) -> float:
+        """[s] the oldest controller setpoint on arrival at its emulated PX4 (simulation time − its stamp) among
+        those that arrived between ``start`` and ``end`` [s, simulation time]."""
+        return self.simulator.sim.setpoint_latency_max(start, end)
+
+    def _hold_for_graph(self, wall_deadline: float) -> None:
+        """Backpressure (``max_graph_lag``): wait while the recorder's clock is too far behind the simulation."""
+        limit = self.options.max_graph_lag
+        clock = self.recorder.get_clock()
+        while self.sim_time - clock.now().nanoseconds * 1e-9 > limit and time.monotonic() < wall_deadline:
+            time.sleep(0.0005)
 
     def run_until(self, condition: Callable[[], bool], wall_timeout: float, sim_timeout: float = math.inf,
                   progress: Callable[[], None] | None = None, progress_period: float = 2.0) -> bool:
@@ -416,18 +422,28 @@ class SwarmGraph:
         wall_deadline = time.monotonic() + wall_timeout
         sim_deadline = self.sim_time + sim_timeout
         next_progress = self.sim_time
-        period = 1.0 / float(self.simulator.get_parameter("control_rate").value)
         while not condition():
             if time.monotonic() > wall_deadline or self.sim_time >= sim_deadline:
                 return False
             self.simulator.step()
-            periods = self.sim_time / period
-            if self.options.graph_lockstep and abs(periods - round(periods)) < 1e-6:
-                self._wait_for_controllers(round(periods) * period)
+            self._hold_for_graph(wall_deadline)
             if progress is not None and self.sim_time >= next_progress:
                 next_progress += progress_period
                 progress()
         return True
+
+    def wait_for_recorder(self, wall_timeout: float = 30.0) -> bool:
+        """Wait until the recorder holds the last published ground truth: the lockstep holds the simulation only
+        while setpoint streams are live, so after the landing (or before arming) the one executor of the ROS
+        graph may lag behind the simulation. False on the (wall) timeout."""
+        last = self.simulator._next_truth - self.simulator.truth_period
+        deadline = time.monotonic() + wall_timeout
+        while time.monotonic() < deadline:
+            with self.recorder.lock:
+                if self.recorder.truth and _t(self.recorder.truth[-1].header.stamp) >= last - 1e-6:
+                    return True
+            time.sleep(0.01)
+        return False
 
     # ---- teardown -----------------------------------------------------------------------------------
     def close(self) -> None:

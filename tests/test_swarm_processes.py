@@ -35,6 +35,7 @@ DURATION = 9.0          # [s] simulated
 CLIMB = (3.0, 5.0)      # left stick up: +0.3 m/s
 HOLD = (6.5, 9.0)
 CLIMB_RATE = 0.3
+CONTROL_PERIOD = 0.02   # [s] controllers at 50 Hz
 
 
 def _start(command: list[str]) -> subprocess.Popen:
@@ -120,11 +121,25 @@ def flight():
 def test_simulator_ran_to_its_duration_with_few_lockstep_timeouts(flight):
     assert flight["returncode"] == 0, flight["logs"]["simulator"][-20:]
     text = "\n".join(flight["logs"]["simulator"])
-    match = re.search(r"duration [\d.]+ s reached: stopping \(lockstep timeouts: (\d+)\)", text)
+    match = re.search(r"duration [\d.]+ s reached: stopping \(lockstep timeouts: (\d+), oldest setpoint on "
+                      r"arrival: (\S+) ms\)", text)
     assert match, flight["logs"]["simulator"][-20:]
-    timeouts = int(match.group(1))
-    print(f"[processes] simulator lockstep timeouts: {timeouts}")
+    timeouts, latency_ms = int(match.group(1)), float(match.group(2))
+    print(f"[processes] simulator lockstep timeouts: {timeouts}; oldest controller setpoint on arrival at PX4: "
+          f"{latency_ms:.0f} ms (simulation time)")
     assert timeouts <= 10  # the first periods wait for the bridges to start streaming (cross-process discovery)
+    # the lockstep waits for each period's own setpoint (not the bridges' repetitions): the simulation never
+    # runs ahead of the controller processes by more than one control period
+    assert 0.0 <= latency_ms <= 1000.0 * CONTROL_PERIOD
+
+
+def test_bridges_never_disarm_on_their_own(flight):
+    """hover.yaml starts armed in OFFBOARD while the bridges start IDLE: no DISARM until the operator's commands
+    (here ARM then FLY at once; the report of an armed PX4 while IDLE is unit-tested in fpr_px4_bridge)."""
+    for i in range(1, N + 1):
+        log = "\n".join(flight["logs"][f"uav{i}"])
+        assert "-> WARMUP" in log and "-> OFFBOARD" in log, f"uav {i}: log incomplete"
+        assert "DISARM" not in log, f"uav {i}: the bridge sent a disarm"
     assert flight["truth"]["t"][-1] >= DURATION - 0.1
 
 

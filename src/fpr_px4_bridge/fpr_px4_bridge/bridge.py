@@ -8,6 +8,16 @@ One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` 
   it is younger than ``setpoint_timeout``, COMMAND_LONGs, the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
 - :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
 
+Setpoint time: each SET_ATTITUDE_TARGET carries in ``time_boot_ms`` the SETPOINT's own instant (the
+``AttitudeThrustSetpoint`` header stamp, the controller's control instant) put on PX4's boot clock by the
+telemetry's time sync (:class:`~fpr_px4_bridge.time_sync.BootTimeMapper`: ROS time = boot time + offset), computed
+once when the setpoint is submitted and kept on its repetitions (a repetition is the same setpoint). Fallbacks:
+the stamp is zero, not finite, or more than ``setpoint_timeout`` away from 'now' (another clock) -> 'now' is
+mapped instead; the offset is not known yet (no telemetry) -> 'now' − the bridge's start (``boot_time``), the
+former stamping. Real PX4 ignores ``time_boot_ms`` in SET_ATTITUDE_TARGET, so this is harmless on the robot; the
+simulator's PX4 emulator uses it for its lockstep (a repetition of an old setpoint does not count as the
+controller's output for a new control period, fpr_sim.simulation).
+
 Thrust: newtons -> PX4 normalized thrust by (C.1)-(C.2) with the live battery voltage (:mod:`fpr_model.battery`),
 clamped to [thrust_min, 1]. The caller serializes access (one lock).
 """
@@ -98,6 +108,7 @@ class _Setpoint:
     q_enu_flu: np.ndarray
     thrust_newton: float
     received: float
+    time_boot_ms: int  #: the setpoint's own instant on PX4's boot clock (see the module doc)
 
 
 class Px4Bridge:
@@ -115,6 +126,7 @@ class Px4Bridge:
         self.rejected_setpoints = 0
         self.setpoints_sent = 0
         self.voltage_fallbacks = 0
+        self.stamp_fallbacks = 0  #: setpoints whose header stamp could not be used (not 0, but invalid)
         self._pending_events: list[LogEvent] = []
 
     # ---- events --------------------------------------------------------------------------------------------
@@ -140,18 +152,37 @@ class Px4Bridge:
             return None, f"setpoint thrust must be finite and >= 0 N, got {thrust}"
         return q / norm, ""
 
-    def submit_setpoint(self, q_enu_flu, thrust_newton: float, uav_id: int, now: float) -> SetpointResult:
-        """A new setpoint (``q`` ``[w, x, y, z]`` body FLU -> local ENU, thrust [N]); refused ones are never sent."""
+    def submit_setpoint(self, q_enu_flu, thrust_newton: float, uav_id: int, now: float,
+                        stamp: float = 0.0) -> SetpointResult:
+        """A new setpoint (``q`` ``[w, x, y, z]`` body FLU -> local ENU, thrust [N]) with its own instant ``stamp``
+        [s] on the local clock (header stamp; 0: none, 'now' is used); refused ones are never sent."""
         q, reason = self._validate(q_enu_flu, thrust_newton, uav_id)
         if q is None:
             self.rejected_setpoints += 1
             self._event("warn", "setpoint.refused", reason + " (not forwarded)")
             return SetpointResult(accepted=False, sent=False, reason=reason)
-        self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now)
+        self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now,
+                                   time_boot_ms=self.setpoint_time_boot_ms(stamp, now))
         sent = False
         if self.machine.stream_allowed():
             sent = self._send_setpoint(now)
         return SetpointResult(accepted=True, sent=sent)
+
+    def setpoint_time_boot_ms(self, stamp: float, now: float) -> int:
+        """``time_boot_ms`` of a setpoint stamped ``stamp`` [s, local clock] submitted at ``now`` (module doc)."""
+        try:
+            stamp = float(stamp)
+        except (TypeError, ValueError):
+            stamp = math.nan
+        usable = math.isfinite(stamp) and stamp > 0.0 and abs(now - stamp) <= self.config.setpoint_timeout
+        if not usable and stamp != 0.0:
+            self.stamp_fallbacks += 1
+            self._event("warn", "setpoint.stamp", f"setpoint stamp {stamp} s unusable at {now:.3f} s "
+                        "(not finite, or another clock): SET_ATTITUDE_TARGET stamped with 'now'")
+        boot = self.telemetry.mapper.to_boot(stamp if usable else now)
+        if boot is None or boot < 0.0:
+            boot = now - self.boot_time  # no time sync yet: the bridge's own clock since its start
+        return int(round(max(0.0, boot) * 1000.0)) & 0xFFFFFFFF
 
     def setpoint_fresh(self, now: float) -> bool:
         sp = self._setpoint
@@ -181,8 +212,7 @@ class Px4Bridge:
             return False
         cfg = self.config
         thrust = self.normalized_thrust(sp.thrust_newton, now)
-        time_boot_ms = int(max(0.0, now - self.boot_time) * 1000.0)
-        msg = encode_set_attitude_target(self.link.mav, time_boot_ms, cfg.target_system, cfg.target_component,
+        msg = encode_set_attitude_target(self.link.mav, sp.time_boot_ms, cfg.target_system, cfg.target_component,
                                          sp.q_enu_flu, thrust)
         if not self.link.send(msg):
             return False

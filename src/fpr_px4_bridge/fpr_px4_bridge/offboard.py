@@ -11,6 +11,13 @@ HEARTBEAT shows it; IDLE once disarmed). KILL -> KILLED (forced disarm, optional
 until IDLE). FAILSAFE: in OFFBOARD the setpoints went stale (the stream stops so that PX4's own offboard-loss
 failsafe acts) or PX4 left OFFBOARD / disarmed on its own; latched until the operator changes the mode.
 DISCONNECTED is reported whenever no HEARTBEAT arrived for ``heartbeat_timeout``; the state underneath is kept.
+
+Disarming: the bridge never disarms on its own initiative. It starts in IDLE and, when PX4 is already armed (a
+scenario that starts hovering, or a bridge restarted in flight), only reports PX4's state (armed, mode) and waits
+for the operator (FLY takes over the stream, LAND lands, KILL disarms). A plain DISARM is sent only on the
+operator's explicit transition to IDLE from ARM, FLY or LAND, and only while PX4 reports armed within
+``command_max_attempts`` × ``command_retry_interval`` of that transition (PX4 refuses it in the air unless it
+thinks it has landed); KILL stays the forced disarm.
 """
 
 from __future__ import annotations
@@ -134,6 +141,9 @@ class OffboardStateMachine:
         self._seen_offboard = False
         self._seen_land = False
         self.offboard_requested_at: float | None = None
+        #: the operator's IDLE after ARM / FLY / LAND: DISARM while PX4 is armed, until this time (None: never)
+        self._disarm_until: float | None = None
+        self._armed_idle_reported = False
 
     # ---- inputs ----------------------------------------------------------------------------------------
     @property
@@ -196,14 +206,21 @@ class OffboardStateMachine:
         if new == self.mode:
             return
         self._event("info", "teleop.mode", f"teleop mode {self.mode.name} -> {new.name}")
-        self.mode = new
+        previous, self.mode = self.mode, new
+        self._disarm_until = None
         state = self._state
         if new == TeleopMode.KILL:
             self._enter(BridgeState.KILLED, "warn", "KILL: forced disarm")
         elif state == BridgeState.KILLED and new != TeleopMode.IDLE:
             self._event("warn", "teleop.killed", f"KILLED is latched: send IDLE before {new.name}")
         elif new == TeleopMode.IDLE:
-            self._enter(BridgeState.IDLE, "info", "IDLE: stream stopped")
+            explicit = previous in (TeleopMode.ARM, TeleopMode.FLY, TeleopMode.LAND)
+            self._enter(BridgeState.IDLE, "info", "IDLE: stream stopped" + (", disarming" if explicit else ""))
+            if explicit:
+                cfg = self.config
+                self._disarm_until = now + cfg.command_max_attempts * cfg.command_retry_interval
+                self._attempts.pop(DISARM.label, None)
+                self._last_sent.pop(DISARM.label, None)
         elif new == TeleopMode.LAND:
             if self.armed:
                 self._enter(BridgeState.LANDING, "info", "LAND requested")
@@ -285,8 +302,7 @@ class OffboardStateMachine:
                 if self.config.kill_flight_termination:
                     self._request(TERMINATE, now, decision, limited=False)
         elif state == BridgeState.IDLE:
-            if self.armed and self.mode == TeleopMode.IDLE:
-                self._request(DISARM, now, decision)
+            self._idle_step(now, decision)
 
         decision.stream = self._state in _STREAMING_STATES and setpoint_fresh
         if decision.stream:
@@ -299,6 +315,26 @@ class OffboardStateMachine:
         decision.events = self._events
         self._events = []
         return decision
+
+    def _idle_step(self, now: float, decision: Decision) -> None:
+        """IDLE: DISARM only for the operator's explicit IDLE (module doc); an armed PX4 is otherwise reported."""
+        if self._disarm_until is not None:
+            if now > self._disarm_until:
+                if self.armed and self.connected(now):
+                    self._event("error", "disarm.failed", "PX4 is still armed after the operator's IDLE (it "
+                                f"refuses to disarm in the air; mode {self.px4_mode.name}): LAND or KILL")
+                self._disarm_until = None
+            elif self.armed and self.custom_mode_seen:
+                self._request(DISARM, now, decision)
+            return
+        if self.armed and self.connected(now) and self.mode == TeleopMode.IDLE:
+            if not self._armed_idle_reported:
+                self._armed_idle_reported = True
+                self._event("warn", "px4.armed_idle",
+                            f"PX4 is armed in {self.px4_mode.name} while the bridge is IDLE: not disarming, "
+                            "waiting for the operator (FLY takes over, LAND lands, KILL disarms)")
+        elif not self.armed:
+            self._armed_idle_reported = False
 
     def stream_allowed(self) -> bool:
         """True when the current state streams setpoints (freshness aside)."""

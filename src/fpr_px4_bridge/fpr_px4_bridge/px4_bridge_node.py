@@ -4,7 +4,8 @@ Run in the UAV's namespace: ``ros2 run fpr_px4_bridge px4_bridge --ros-args -r _
 Subscribes ``setpoint`` (fpr_msgs/AttitudeThrustSetpoint) and ``/fpr/teleop`` (fpr_msgs/TeleopCommand);
 publishes ``imu`` (sensor_msgs/Imu), ``velocity_body`` (geometry_msgs/TwistStamped), ``battery``
 (sensor_msgs/BatteryState) and ``status`` (fpr_msgs/UavStatus). All times come from the node clock
-(``use_sim_time`` honoured).
+(``use_sim_time`` honoured). Each SET_ATTITUDE_TARGET carries the setpoint's header stamp on PX4's boot clock
+in ``time_boot_ms`` (ignored by real PX4; used by the simulator's lockstep), see :mod:`fpr_px4_bridge.bridge`.
 """
 
 from __future__ import annotations
@@ -145,7 +146,8 @@ class Px4BridgeNode(Node):
     def _on_setpoint(self, msg: AttitudeThrustSetpoint) -> None:
         q = msg.attitude
         with self._lock:
-            self.bridge.submit_setpoint((q.w, q.x, q.y, q.z), msg.thrust, msg.uav_id, self._now())
+            self.bridge.submit_setpoint((q.w, q.x, q.y, q.z), msg.thrust, msg.uav_id, self._now(),
+                                        stamp=msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
             events = self.bridge.take_events()
         self._log.emit(events)
 
@@ -264,6 +266,10 @@ def main(args=None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
     finally:
         if node is not None:
             node.destroy_node()

@@ -5,6 +5,9 @@ sliding window of samples: transport and scheduling delays only add to a sample,
 the best estimate, and the window lets the estimate follow clock drift. Works with wall time and with
 simulation time (``use_sim_time``), since both clocks are just the ``t_received`` the caller passes in.
 
+The inverse, :meth:`BootTimeMapper.to_boot`, puts a local instant on the autopilot's boot clock: the bridge
+stamps each SET_ATTITUDE_TARGET with its setpoint's own instant that way (see :mod:`fpr_px4_bridge.bridge`).
+
 The estimate restarts when the autopilot reboots (``t_boot`` jumps back) or the local clock jumps back (a
 simulation reset), so stamps never come out of an old epoch.
 """
@@ -61,3 +64,8 @@ class BootTimeMapper:
         """Local time of the autopilot instant ``boot_time``; ``fallback`` (e.g. the receive time) before any sample."""
         offset = self.offset
         return fallback if offset is None else boot_time + offset
+
+    def to_boot(self, local_time: float) -> float | None:
+        """The autopilot boot-clock instant [s] of the local instant ``local_time``; None before any sample."""
+        offset = self.offset
+        return None if offset is None else local_time - offset

@@ -230,3 +230,38 @@ def test_telemetry_is_converted_to_enu_flu(setup):
     np.testing.assert_allclose(odo.linear, [1.0, -2.0, 0.5], atol=1e-6)
     # NED north velocity seen from a body yawed 0.6 rad (NED) to the right of north: FLU (cos, +sin... left<0)
     np.testing.assert_allclose(local.linear, [math.cos(0.6), math.sin(0.6), 0.0], atol=1e-6)
+
+
+def _attitude_quaternion(peer, boot_ms):
+    peer.send(peer.mav.attitude_quaternion_encode(time_boot_ms=boot_ms, q1=1.0, q2=0.0, q3=0.0, q4=0.0,
+                                                  rollspeed=0.0, pitchspeed=0.0, yawspeed=0.0))
+
+
+def test_set_attitude_target_carries_the_setpoint_stamp_on_px4_boot_clock_and_keeps_it_on_repeats(setup):
+    """time_boot_ms = setpoint header stamp − (ROS time − PX4 boot time); the 50 Hz repetitions keep it."""
+    bridge, peer = setup
+    connect(bridge, peer, 100.0)
+    bridge.on_teleop(TeleopMode.ARM, 100.0)  # ARMING streams (PX4 reports armed: WARMUP)
+    # no telemetry yet: the offset is unknown, the former stamping ('now' since the bridge's start) is used
+    assert bridge.telemetry.mapper.offset is None
+    bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.0, stamp=99.99)
+    (msg,) = kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")[-1:]
+    assert msg[1].time_boot_ms == 100_000  # bridge boot_time 0
+    # telemetry stamped 40.000 s on PX4's boot clock arrives at ROS time 100.002: offset 60.002 s
+    _attitude_quaternion(peer, 40_000)
+    bridge.poll(100.002, timeout=1.0)
+    assert bridge.telemetry.mapper.offset == pytest.approx(60.002)
+    result = bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.010, stamp=100.005)
+    assert result.sent
+    for t in (100.02, 100.04, 100.06):  # repetitions of the same setpoint
+        bridge.tick(t)
+    frames = [m for _, m in kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")]
+    assert len(frames) == 4 and {m.time_boot_ms for m in frames} == {40_003}
+    # zero stamp ("none"): 'now' mapped; NaN or another clock's stamp: 'now' mapped, with a warning
+    for stamp, expected, warned in ((0.0, 40_068, False), (math.nan, 40_068, True), (5.0, 40_068, True)):
+        bridge.take_events()
+        bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.070, stamp=stamp)
+        (frame,) = [m for _, m in kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")]
+        assert frame.time_boot_ms == expected
+        assert any(e.key == "setpoint.stamp" for e in bridge.take_events()) == warned
+    assert bridge.stamp_fallbacks == 2

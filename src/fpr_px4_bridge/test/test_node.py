@@ -54,6 +54,7 @@ class SimTime:
         self.ns = int(START_TIME * 1e9)
         self.setpoint: AttitudeThrustSetpoint | None = None
         self.last_publish: float | None = None  # [s] the controller's last setpoint
+        self.published: list[float] = []  # [s] stamps of the controller's setpoints
         self.ticks: list[float] = []
         tick = node.bridge.tick
 
@@ -62,6 +63,16 @@ class SimTime:
             return tick(now)
 
         node.bridge.tick = recorded_tick  # observed, not changed: step() waits for each tick
+        self.sent: list[float] = []  # [s] the bridge's SET_ATTITUDE_TARGET send times (its clock)
+        send = node.bridge._send_setpoint
+
+        def recorded_send(now: float) -> bool:
+            sent = send(now)
+            if sent:
+                self.sent.append(now)
+            return sent
+
+        node.bridge._send_setpoint = recorded_send  # observed, not changed
 
     @property
     def now(self) -> float:
@@ -76,8 +87,10 @@ class SimTime:
         if self.ns % CONTROL_PERIOD_NS == 0:
             assert wait_for(lambda: self.ticks and self.ticks[-1] >= self.now - 1e-6), f"tick at {self.now}"
             if self.setpoint is not None:
+                self.setpoint.header.stamp = stamp.to_msg()  # the control instant, as the controller stamps it
                 self.setpoint_pub.publish(self.setpoint)
                 self.last_publish = self.now
+                self.published.append(self.now)
 
     def run_until(self, predicate, sim_timeout: float, what: str) -> float:
         deadline = self.now + sim_timeout
@@ -185,13 +198,23 @@ def test_fly_stream_rate_offboard_after_warmup_and_stale_stop(graph):
     last_publish = sim.last_publish
     sim.run_until(lambda: statuses[-1].offboard and statuses[-1].state == UavStatus.STATE_OFFBOARD, 0.2, "OFFBOARD")
     sim.run_for(SETPOINT_TIMEOUT + 1.5)
-    # the bridge's send times, from its own time_boot_ms (its boot: 0, it started before the first /clock)
+    # the bridge's send times (simulation time); every frame reached the peer
+    times = np.array(sim.sent)
     with fake.lock:
-        times = np.array([r.msg.time_boot_ms * 1e-3 for r in fake.setpoints])
+        boot_ms = np.array([r.msg.time_boot_ms for r in fake.setpoints])
+    assert len(boot_ms) == len(times)
+    # time_boot_ms is the SETPOINT's instant (its header stamp) on PX4's boot clock (here the simulation clock,
+    # mapped through the telemetry offset), the same on every repetition: one value per published setpoint
+    offset = node.bridge.telemetry.mapper.offset
+    assert offset is not None and -0.005 <= offset <= 0.001  # the fake's telemetry leads the /clock by <= 4 ms
+    expected = np.round((np.array(sim.published) - offset) * 1000.0).astype(int)
+    distinct = np.unique(boot_ms)
+    assert np.array_equal(distinct, expected), (distinct[:5], expected[:5])
+    assert np.all(np.diff(boot_ms) >= 0) and len(boot_ms) > len(distinct)  # repetitions keep their stamp
     # >= 50 Hz at the peer over the whole stream (simulation time)
     span = times[-1] - times[0]
     assert span > 2.5 and len(times) - 1 >= STREAM_RATE * span, (len(times), span)
-    assert np.diff(times).max() <= 1.0 / STREAM_RATE + 0.0015  # no gap (1 ms: time_boot_ms resolution)
+    assert np.diff(times).max() <= 1.0 / STREAM_RATE + 1e-9  # no gap
     # OFFBOARD requested only after >= 1 s of stream (received at the peer, simulation time)
     set_modes = [c for c in fake.command_list() if c.msg.command == 176 and int(c.msg.param2) == 6]
     assert set_modes and set_modes[0].t - times[0] >= 1.0

@@ -176,3 +176,84 @@ def test_commands_are_held_while_disconnected_and_bad_teleop_modes_ignored():
 def test_config_refuses_short_warmup():
     with pytest.raises(ValueError):
         OffboardConfig(offboard_warmup=0.5)
+
+
+# ---- disarming: only on the operator's explicit IDLE, never at start-up ---------------------------------------
+def _all_commands(steps):
+    return [label for _, d in steps for label in labels(d)]
+
+
+def test_start_up_with_an_armed_px4_never_disarms_and_waits_for_the_operator():
+    """A bridge (re)started while PX4 flies in OFFBOARD (hover scenario, restart in flight): IDLE, PX4's state
+    reported, not one command sent, however long the operator's IDLE (the teleop default) lasts."""
+    m = OffboardStateMachine(OffboardConfig(offboard_warmup=1.0))
+    m.on_teleop(TeleopMode.IDLE, 0.0)  # teleop publishes IDLE from its start: a no-op
+    steps = run(m, 0.0, 10.0, base=ARMED, mode=p.CUSTOM_MODE_OFFBOARD)
+    for t in (2.0, 5.0):
+        m.on_teleop(TeleopMode.IDLE, t)
+    steps += run(m, 10.0, 12.0, base=ARMED, mode=p.CUSTOM_MODE_OFFBOARD)
+    assert _all_commands(steps) == []
+    assert m.state == BridgeState.IDLE and m.reported_state(12.0) == BridgeState.IDLE
+    assert m.armed and m.px4_mode.is_offboard and m.custom_mode == p.CUSTOM_MODE_OFFBOARD
+    warnings = [e for _, d in steps for e in d.events if e.key == "px4.armed_idle"]
+    assert len(warnings) == 1 and "not disarming" in warnings[0].text and warnings[0].level == "warn"
+    assert not any(d.stream for _, d in steps)
+    # the operator takes over: FLY streams, and PX4 (already OFFBOARD) makes it OFFBOARD without any command
+    m.on_teleop(TeleopMode.FLY, 12.0)
+    steps = run(m, 12.0, 12.1, base=ARMED, mode=p.CUSTOM_MODE_OFFBOARD)
+    assert m.state == BridgeState.OFFBOARD and steps[-1][1].stream
+    assert _all_commands(steps) == []
+
+
+def test_start_up_with_an_armed_px4_then_kill_is_the_forced_disarm():
+    m = OffboardStateMachine()
+    steps = run(m, 0.0, 3.0, base=ARMED)
+    assert _all_commands(steps) == []
+    m.on_teleop(TeleopMode.KILL, 3.0)
+    assert labels(m.step(3.0, True)) == ["FORCE_DISARM"]
+
+
+def test_operator_idle_after_fly_sends_plain_disarm_with_limited_attempts():
+    m = _flying()
+    m.on_teleop(TeleopMode.IDLE, 1.3)
+    steps = run(m, 1.3, 8.0, base=ARMED, mode=p.CUSTOM_MODE_OFFBOARD)  # PX4 refuses (in the air)
+    assert m.state == BridgeState.IDLE and not any(d.stream for _, d in steps)
+    disarms = [d.commands[0] for _, d in steps if d.commands]
+    assert len(disarms) == OffboardConfig().command_max_attempts
+    assert all(c.label == "DISARM" and c.params[:2] == (0.0, 0.0) for c in disarms)  # plain, never forced
+    events = [e for _, d in steps for e in d.events]
+    keys = [e.key for e in events]
+    assert "disarm.failed" in keys and events[keys.index("disarm.failed")].level == "error"
+    # then, still armed: reported, nothing more sent (waits for the operator's LAND or KILL)
+    assert "px4.armed_idle" not in keys or keys.index("px4.armed_idle") > keys.index("disarm.failed")
+
+
+def test_operator_idle_disarm_stops_once_disarmed():
+    m = _flying()
+    m.on_teleop(TeleopMode.IDLE, 1.3)
+    assert labels(m.step(1.3, True)) == ["DISARM"]
+    steps = run(m, 1.32, 6.0, base=DISARMED)
+    assert _all_commands(steps) == [] and m.state == BridgeState.IDLE and not m.armed
+
+
+def test_operator_idle_after_arm_disarms_a_px4_that_arms_late():
+    """ARM then IDLE at once: the ARM command in flight arms PX4 a moment later; the operator's IDLE wins."""
+    m = OffboardStateMachine()
+    m.on_heartbeat(DISARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.ARM, 0.0)
+    assert labels(m.step(0.0, True)) == ["ARM"]
+    m.on_teleop(TeleopMode.IDLE, 0.1)
+    steps = run(m, 0.1, 0.5, base=DISARMED)
+    assert _all_commands(steps) == []
+    steps = run(m, 0.5, 1.5, base=ARMED)
+    assert _all_commands(steps)[:1] == ["DISARM"]
+
+
+def test_idle_after_kill_or_failed_arming_sends_no_plain_disarm():
+    m = OffboardStateMachine()
+    m.on_heartbeat(ARMED, POSCTL, 0.0)
+    m.on_teleop(TeleopMode.KILL, 0.0)
+    m.step(0.0, True)
+    m.on_teleop(TeleopMode.IDLE, 0.1)  # unlatch KILL (PX4 still reports armed)
+    steps = run(m, 0.1, 4.0, base=ARMED)
+    assert "DISARM" not in _all_commands(steps) and m.state == BridgeState.IDLE

@@ -29,3 +29,12 @@ def test_window_lets_the_offset_drift_upwards():
     assert mapper.offset == pytest.approx(1.0 + 0.001 * 90, abs=1e-9)
     with pytest.raises(ValueError):
         BootTimeMapper(window=0)
+
+
+def test_to_boot_is_the_inverse_of_to_local():
+    mapper = BootTimeMapper()
+    assert mapper.to_boot(5.0) is None  # no sample yet: the caller falls back
+    mapper.update(12.0, 112.5)
+    mapper.update(12.1, 112.56)  # least delayed: offset 100.46
+    assert mapper.to_boot(112.7) == pytest.approx(12.24)
+    assert mapper.to_local(mapper.to_boot(112.7), fallback=0.0) == pytest.approx(112.7)

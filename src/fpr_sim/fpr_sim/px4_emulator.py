@@ -18,10 +18,22 @@ Behaviour (spec px4_ros_facts.md §1.3-§1.5):
   mode, THROTTLE_IGNORE keeps the thrust, yaw rate feed-forward unless bit 4). Each valid message is offboard
   proof of life; a NaN/inf or non-unit quaternion or NaN thrust is rejected (previous setpoint kept, counted);
   thrust is clamped to [0, 1]; messages for another system id are ignored;
+- setpoint time (for the simulator's lockstep only; real PX4 ignores ``time_boot_ms`` in SET_ATTITUDE_TARGET):
+  ``time_boot_ms`` is read as the setpoint's own instant on this PX4's boot clock (fpr_px4_bridge puts the
+  controller's stamp there, and keeps it on its repetitions). :attr:`Px4Emulator.setpoint_time_ms` is the
+  instant of the latest setpoint; a message with the same ``time_boot_ms`` as the one before is a repetition
+  (counted, still proof of life). (Different, not just later: the sender's boot-time mapping may shift by a few
+  ms when its time-sync estimate moves.) ``time_boot_ms`` = 0 means "no time given" (scripted pymavlink
+  clients): the message is stamped with its arrival time, i.e. every such message is new, as before this rule.
+  :attr:`Px4Emulator.setpoint_latency` keeps the age of each new stamped setpoint on arrival (simulation time −
+  its ``time_boot_ms``);
 - offboard loss: no setpoint for COM_OF_LOSS_T (1 s) in OFFBOARD -> failsafe: AUTO.LOITER (level attitude,
   last thrust) for ``failsafe_hold_time``, then AUTO.LAND (level, reduced thrust) and disarm once landed;
 - telemetry from simulation time: ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED (own frame
   F0i, NED) at ``telemetry_rate``; HEARTBEAT, SYS_STATUS, BATTERY_STATUS at ``status_rate``;
+- boot clock: PX4 "boots" at simulation time 0, so ``time_boot_ms`` = :func:`boot_time_ms` (simulation time,
+  rounded to the millisecond) in telemetry, and setpoint stamps are compared with simulation instants on the same
+  millisecond grid;
 - malformed, unknown or unhandled MAVLink is ignored and counted (:attr:`Px4Emulator.counters`).
 """
 
@@ -29,7 +41,8 @@ from __future__ import annotations
 
 import math
 import socket
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 from fpr_model.frames import enu_to_ned, flu_to_frd, quat_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
@@ -61,7 +74,8 @@ from fpr_px4_bridge.px4_protocol import (
 from fpr_sim.scenario import Px4Config
 from fpr_sim.sensors import ImuSample
 
-__all__ = ["LOCAL_BASE_PORT", "REMOTE_BASE_PORT", "EmulatorCounters", "Px4Emulator", "Px4Setpoint"]
+__all__ = ["LOCAL_BASE_PORT", "REMOTE_BASE_PORT", "EmulatorCounters", "Px4Emulator", "Px4Setpoint",
+           "SetpointLatency", "boot_time_ms"]
 
 #: PX4 SITL instance k binds 127.0.0.1:(14580 + k) and sends to 127.0.0.1:(14540 + k) (its onboard MAVLink link).
 LOCAL_BASE_PORT = 14580
@@ -76,17 +90,48 @@ MAV_STATE_STANDBY = 3
 _UNIT_TOLERANCE = 1e-3
 
 
+def boot_time_ms(sim_time: float) -> int:
+    """The emulated PX4's ``time_boot_ms`` at simulation time ``sim_time`` [s] (it boots at t = 0)."""
+    return int(round(max(0.0, sim_time) * 1000.0)) & 0xFFFFFFFF
+
+
 @dataclass
 class EmulatorCounters:
     """Counts of what one emulator received."""
 
     datagrams: int = 0
-    setpoints: int = 0  #: accepted SET_ATTITUDE_TARGET
+    setpoints: int = 0  #: accepted SET_ATTITUDE_TARGET (new ones and repetitions)
+    new_setpoints: int = 0  #: accepted with another time_boot_ms than the one before (not a repetition)
     rejected_setpoints: int = 0  #: NaN/inf, non-unit quaternion, NaN thrust
     garbage: int = 0  #: malformed frames (bad CRC, bad length, unknown message id)
     ignored: int = 0  #: valid MAVLink we do not handle, or addressed to another system
     commands: int = 0
     failsafes: int = 0
+
+
+@dataclass
+class SetpointLatency:
+    """Ages of the new, stamped setpoints on arrival: simulation time − their ``time_boot_ms`` [s]; the last
+    ``history`` (arrival time [s], age [s]) pairs are kept for windowed statistics."""
+
+    count: int = 0
+    total: float = 0.0
+    max: float = -math.inf
+    history: deque = field(default_factory=lambda: deque(maxlen=1 << 17))
+
+    def add(self, arrival: float, age: float) -> None:
+        self.count += 1
+        self.total += age
+        self.max = max(self.max, age)
+        self.history.append((arrival, age))
+
+    @property
+    def mean(self) -> float:
+        return self.total / self.count if self.count else math.nan
+
+    def ages_between(self, start: float, end: float) -> np.ndarray:
+        """Ages [s] of the setpoints that arrived in [start, end] (simulation time)."""
+        return np.array([age for arrival, age in self.history if start <= arrival <= end], dtype=float)
 
 
 @dataclass
@@ -141,6 +186,9 @@ class Px4Emulator:
         self.rate_feedforward = np.zeros(3)
         self.rate_mode = False
         self.landed = True
+        #: boot-clock instant [ms] of the latest setpoint (its time_boot_ms; arrival time when that was 0)
+        self.setpoint_time_ms: int | None = None
+        self.setpoint_latency = SetpointLatency()
 
     # ------------------------------------------------------------------------------------------ frames
     @property
@@ -216,6 +264,7 @@ class Px4Emulator:
         if not np.isfinite(rates).all():
             rates = np.zeros(3)
         self.counters.setpoints += 1
+        self._stamp_setpoint(int(msg.time_boot_ms))
         gap_limit = 1.0 / self.config.offboard_min_rate
         if self._last_setpoint_time is None or self.time - self._last_setpoint_time > gap_limit:
             self._stream_start = self.time
@@ -231,6 +280,16 @@ class Px4Emulator:
         elif not (mask & BODY_ROLL_RATE_IGNORE and mask & BODY_PITCH_RATE_IGNORE):
             self.rate_mode = True
             self.rate_feedforward = rates_flu
+
+    def _stamp_setpoint(self, time_boot_ms: int) -> None:
+        """Track the newest setpoint instant (see the module doc); 0: no time given, stamped on arrival."""
+        now_ms = boot_time_ms(self.time)
+        stamp = time_boot_ms or now_ms
+        if stamp != self.setpoint_time_ms:
+            self.setpoint_time_ms = stamp
+            self.counters.new_setpoints += 1
+            if time_boot_ms:
+                self.setpoint_latency.add(self.time, (now_ms - stamp) * 1e-3)
 
     def stream_healthy(self) -> bool:
         """A setpoint stream faster than offboard_min_rate has run for at least offboard_warmup seconds."""
@@ -375,9 +434,11 @@ class Px4Emulator:
             id=0, battery_function=0, type=1, temperature=32767, voltages=[cell, cell, cell] + [65535] * 7,
             current_battery=centiamps, current_consumed=-1, energy_consumed=-1, battery_remaining=percent))
 
-    def send_telemetry(self, sample: ImuSample) -> None:
-        """ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED from a sample in F0i / FLU."""
-        ms = int(self.time * 1000.0) & 0xFFFFFFFF
+    def send_telemetry(self, sample: ImuSample, sim_time: float | None = None) -> None:
+        """ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED from a sample in F0i / FLU, taken at
+        simulation time ``sim_time`` [s] (default: the time of the last :meth:`poll` / :meth:`update`)."""
+        t = self.time if sim_time is None else float(sim_time)
+        ms = boot_time_ms(t)
         q_ned = quat_enu_flu_to_ned_frd(sample.quat_local)
         rates = flu_to_frd(sample.rate)
         accel = flu_to_frd(sample.specific_force)
@@ -389,7 +450,7 @@ class Px4Emulator:
                                             rollspeed=float(rates[0]), pitchspeed=float(rates[1]),
                                             yawspeed=float(rates[2])))
         self._send(self.mav.highres_imu_encode(
-            time_usec=int(self.time * 1e6), xacc=float(accel[0]), yacc=float(accel[1]), zacc=float(accel[2]),
+            time_usec=int(round(max(0.0, t) * 1e6)), xacc=float(accel[0]), yacc=float(accel[1]), zacc=float(accel[2]),
             xgyro=float(rates[0]), ygyro=float(rates[1]), zgyro=float(rates[2]), xmag=0.0, ymag=0.0, zmag=0.0,
             abs_pressure=0.0, diff_pressure=0.0, pressure_alt=0.0, temperature=25.0, fields_updated=0x3F, id=0))
         p = enu_to_ned(sample.position_local)

@@ -4,14 +4,25 @@ Time base: the plant's fixed step (1 ms). Each step: the emulators read MAVLink 
 PX4 controller rate (250 Hz) and feed the attitude controllers; telemetry goes out at ``telemetry_rate`` and
 status at ``status_rate`` (simulation time).
 
-Lockstep: at every control-period boundary (``control_rate``, 50 Hz) the simulation does not advance until every
-UAV whose setpoint stream is live has received a new setpoint since the previous boundary, or ``lockstep_timeout``
-wall seconds passed (then :attr:`Simulation.lockstep_timeouts` is incremented). Results then do not depend on the
-machine's speed. A stream is live when a setpoint arrived during the previous control period, armed or not (so
-the stream that must precede arming and OFFBOARD is seen at its true rate in simulation time, however fast the
-simulation could run), or while an armed OFFBOARD UAV has not received any setpoint yet (a scenario that starts
-hovering waits for its controllers). A stream that stops costs one timeout, then the simulation runs on (PX4's
-offboard-loss failsafe plays out in simulation time). ``lockstep = False`` never waits.
+Lockstep (DESIGN.md §5): at every control-period boundary T_k (``control_rate``, 50 Hz) the simulation does not
+advance until every UAV whose setpoint stream is live has a setpoint NEW for that period, or ``lockstep_timeout``
+wall seconds passed (then :attr:`Simulation.lockstep_timeouts` is incremented). A setpoint is new for T_k when its
+own instant (SET_ATTITUDE_TARGET ``time_boot_ms`` on the emulated PX4's boot clock = simulation time, see
+:mod:`fpr_sim.px4_emulator`; fpr_px4_bridge sends the controller's stamp there) is later than the previous
+boundary T_{k-1} AND is not the setpoint that served the previous boundary (a repetition carries its stamp;
+"different" rather than "later" because the bridge's boot-time mapping can move back by a few ms when its
+time-sync estimate improves, which must not make a new setpoint look old). So the bridge's 50 Hz repetitions
+of an older setpoint never count (they carry the older stamp), nor does a controller that runs behind (its
+setpoint computed on a /clock before T_{k-1}): the controllers' inputs are at most one control period old, and
+results do not depend on the machine's speed. The controllers' timers need not be phase-aligned with the
+boundaries (a setpoint computed at T_{k-1} + 4 ms serves T_k). Scripted MAVLink clients that send
+``time_boot_ms`` = 0 get their setpoints stamped on arrival (each one new), the former behaviour.
+
+A stream is live when a new setpoint arrived during the previous control period, armed or not (so the stream that
+must precede arming and OFFBOARD is seen at its true rate in simulation time, however fast the simulation could
+run), or while an armed OFFBOARD UAV has not received any setpoint yet (a scenario that starts hovering waits for
+its controllers). A stream that stops (or only repeats an old setpoint) costs one timeout, then the simulation
+runs on (PX4's offboard-loss failsafe plays out in simulation time). ``lockstep = False`` never waits.
 
 MAVLink: one :class:`~fpr_sim.px4_emulator.Px4Emulator` per UAV, as PX4 SITL instance i − 1: bound to
 127.0.0.1:(``local_base_port`` + i − 1), sending to 127.0.0.1:(``remote_base_port`` + i − 1) where the bridge
@@ -20,6 +31,7 @@ listens (see :mod:`fpr_sim.px4_emulator`).
 
 from __future__ import annotations
 
+import math
 import select
 import time
 from dataclasses import dataclass
@@ -27,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fpr_sim.plant import GroundTruth, Plant
-from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator
+from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator, boot_time_ms
 from fpr_sim.quadrotor import AttitudeCommand
 from fpr_sim.scenario import Scenario
 from fpr_sim.sensors import UavSensors
@@ -74,8 +86,9 @@ class Simulation:
         self._steps_per_px4 = max(1, int(round(self.options.physics_rate / scenario.px4.controller_rate)))
         self._steps_per_telemetry = max(1, int(round(self.options.physics_rate / scenario.px4.telemetry_rate)))
         self._steps_per_status = max(1, int(round(self.options.physics_rate / scenario.px4.status_rate)))
-        self._boundary_counts = [0] * n
-        self._stream_live = [False] * n  # a setpoint arrived during the previous control period
+        self._previous_boundary_ms = 0  # T_{k-1} on the PX4 boot clock [ms]
+        self._served_ms: list[int | None] = [None] * n  # latest setpoint instant when T_{k-1} was passed [ms]
+        self._stream_live = [False] * n  # a new setpoint arrived during the previous control period
         self.lockstep_timeouts = 0
         self.lockstep_waits = 0
         self._truth = truth
@@ -141,7 +154,7 @@ class Simulation:
         for i, emulator in enumerate(self.emulators):
             sample = self.sensors.sample(i, truth.uav_quats[i], truth.uav_rates[i], truth.uav_specific_forces[i],
                                          truth.uav_positions[i], truth.uav_velocities[i])
-            emulator.send_telemetry(sample)
+            emulator.send_telemetry(sample, truth.time)
             if status:
                 emulator.send_status(float(truth.battery_voltages[i]), float(truth.battery_remaining[i]),
                                      float(battery.current[i]))
@@ -149,16 +162,20 @@ class Simulation:
     def _expects_setpoint(self, i: int) -> bool:
         """Lockstep waits for UAV i: its stream is live, or it is armed in OFFBOARD and never got a setpoint."""
         emulator = self.emulators[i]
-        return self._stream_live[i] or (emulator.armed and emulator.offboard and emulator.counters.setpoints == 0)
+        return self._stream_live[i] or (emulator.armed and emulator.offboard and emulator.counters.new_setpoints == 0)
+
+    def _has_new_setpoint(self, i: int) -> bool:
+        """UAV i's newest setpoint is new for the current boundary (see the module doc)."""
+        stamp = self.emulators[i].setpoint_time_ms
+        return stamp is not None and stamp != self._served_ms[i] and stamp > self._previous_boundary_ms
 
     def _wait_for_setpoints(self) -> None:
-        """Lockstep: block until each expected emulator got a setpoint since the last boundary (or timeout)."""
+        """Lockstep: block until each expected emulator has a setpoint new for this boundary (or timeout)."""
         deadline = time.monotonic() + self.options.lockstep_timeout
         t = self.plant.time
         expected = [i for i in range(self.n) if self._expects_setpoint(i)]
         while True:
-            missing = [self.emulators[i] for i in expected
-                       if self.emulators[i].counters.setpoints <= self._boundary_counts[i]]
+            missing = [self.emulators[i] for i in expected if not self._has_new_setpoint(i)]
             if not missing:
                 break
             remaining = deadline - time.monotonic()
@@ -169,9 +186,18 @@ class Simulation:
             readable, _, _ = select.select(missing, [], [], min(remaining, 0.05))
             for emulator in readable:
                 emulator.poll(t)
-        counts = [e.counters.setpoints for e in self.emulators]
-        self._stream_live = [c > b for c, b in zip(counts, self._boundary_counts, strict=True)]
-        self._boundary_counts = counts
+        stamps = [e.setpoint_time_ms for e in self.emulators]
+        self._stream_live = [stamp is not None and stamp != served
+                             for stamp, served in zip(stamps, self._served_ms, strict=True)]
+        self._served_ms = stamps
+        self._previous_boundary_ms = boot_time_ms(t)
+
+    def setpoint_latency_max(self, start: float = 0.0, end: float = math.inf) -> float:
+        """Oldest new setpoint on arrival at its PX4 between ``start`` and ``end`` (simulation time [s]), all
+        UAVs [s] (arrival − its stamp; with the lockstep and controllers computing on each boundary's /clock: 0,
+        except while a graph that fell behind during a stream-free phase catches up); NaN without any."""
+        ages = np.concatenate([e.setpoint_latency.ages_between(start, end) for e in self.emulators])
+        return float(ages.max()) if len(ages) else math.nan
 
     def step(self) -> None:
         """One physics step with the PX4, telemetry and lockstep schedules."""

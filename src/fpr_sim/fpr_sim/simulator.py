@@ -42,7 +42,8 @@ class SimulatorNode(Node):
         p = self.declare_parameter
         p("scenario_file", "", descriptor=_desc("scenario YAML (see config/scenarios); empty: default scenario"))
         p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
-        p("lockstep", True, descriptor=_desc("wait for every armed UAV's setpoint each control period"))
+        p("lockstep", True, descriptor=_desc(
+            "wait at each control period for every streaming UAV's setpoint computed for that period"))
         p("lockstep_timeout", 0.5, descriptor=_desc("wall-clock wait per control period before giving up [s]"))
         p("control_rate", 50.0, descriptor=_desc("controllers' rate used by the lockstep [Hz]"))
         p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
@@ -125,7 +126,8 @@ class SimulatorNode(Node):
                 time.sleep(ahead)
         if self.duration > 0.0 and t >= self.duration:
             self.get_logger().info(f"duration {self.duration} s reached: stopping "
-                                   f"(lockstep timeouts: {self.sim.lockstep_timeouts})")
+                                   f"(lockstep timeouts: {self.sim.lockstep_timeouts}, oldest setpoint on "
+                                   f"arrival: {1000.0 * self.sim.setpoint_latency_max():.0f} ms)")
             return False
         return True
 

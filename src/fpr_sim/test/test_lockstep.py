@@ -1,0 +1,174 @@
+"""Lockstep of the simulator core (DESIGN.md §5) against scripted MAVLink clients, ROS-free and single-threaded:
+the clients' datagrams are queued on the emulators' sockets before the simulation reaches a boundary, so what the
+lockstep sees is exact. A setpoint counts for the boundary T_k only when its time_boot_ms (the setpoint's own
+instant, on the emulated PX4's boot clock = simulation time) is later than T_{k-1} and than the setpoint that
+served T_{k-1}; time_boot_ms = 0 is stamped on arrival (scripted clients, the former behaviour)."""
+
+import os
+import socket
+
+import numpy as np
+import pytest
+
+os.environ["MAVLINK20"] = "1"
+from fpr_model.frames import quat_enu_flu_to_ned_frd  # noqa: E402
+from fpr_px4_bridge.px4_protocol import import_mavlink  # noqa: E402
+from fpr_sim.px4_emulator import boot_time_ms  # noqa: E402
+from fpr_sim.scenario import scenario_from_dict  # noqa: E402
+from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
+
+PERIOD = 0.02  # [s] control period
+TIMEOUT = 0.05  # [s] wall: the lockstep's wait (short: the tests provoke timeouts on purpose)
+
+
+class Controllers:
+    """One UDP socket per UAV, sending SET_ATTITUDE_TARGET with a chosen time_boot_ms to its emulator."""
+
+    def __init__(self, sim: Simulation) -> None:
+        self.sim = sim
+        mavlink = import_mavlink()
+        self.mavs = [mavlink.MAVLink(None, srcSystem=200 + i, srcComponent=191) for i in range(sim.n)]
+        self.socks = []
+        for _ in range(sim.n):
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock.bind(("127.0.0.1", 0))
+            sock.setblocking(False)
+            self.socks.append(sock)
+        self.targets = [(quat_enu_flu_to_ned_frd(e.quat_local), e.thrust) for e in sim.emulators]
+
+    def send(self, time_boot_ms: int, uavs=None) -> None:
+        for i in range(self.sim.n) if uavs is None else uavs:
+            q, thrust = self.targets[i]
+            msg = self.mavs[i].set_attitude_target_encode(
+                time_boot_ms=int(time_boot_ms), target_system=i + 1, target_component=1, type_mask=7,
+                q=[float(c) for c in q], body_roll_rate=0.0, body_pitch_rate=0.0, body_yaw_rate=0.0,
+                thrust=float(thrust))
+            self.socks[i].sendto(msg.pack(self.mavs[i]), ("127.0.0.1", self.sim.ports[i]))
+
+    def telemetry_stamps(self, kind: str) -> list[int]:
+        parser = import_mavlink().MAVLink(None)
+        stamps = []
+        for sock in self.socks:
+            while True:
+                try:
+                    data = sock.recv(65535)
+                except BlockingIOError:
+                    break
+                for msg in parser.parse_buffer(data) or []:
+                    if msg.get_type() == kind:
+                        stamps.append(int(msg.time_boot_ms))
+        return stamps
+
+    def close(self) -> None:
+        for sock in self.socks:
+            sock.close()
+
+
+@pytest.fixture
+def rig():
+    """Hovering, armed in OFFBOARD (the lockstep expects every UAV from the start); no ground, no cameras."""
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
+                                   "ground": {"enabled": False}, "cameras": {"enabled": False}})
+    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=True,
+                                                 lockstep_timeout=TIMEOUT))
+    controllers = Controllers(sim)
+    yield sim, controllers
+    controllers.close()
+    sim.close()
+
+
+def now_ms(sim: Simulation) -> int:
+    return boot_time_ms(sim.time)
+
+
+def fresh_periods(sim, controllers, periods: int, phase: float = 0.0) -> None:
+    """A controller per UAV computing on the /clock at each boundary + ``phase`` [s]: setpoints stamped then."""
+    for _ in range(periods):
+        if phase:
+            sim.advance(phase)
+        controllers.send(now_ms(sim))
+        sim.advance(PERIOD - phase)
+
+
+def test_fresh_setpoints_every_period_never_time_out_and_arrive_on_time(rig):
+    sim, controllers = rig
+    fresh_periods(sim, controllers, 10)
+    assert sim.lockstep_timeouts == 0
+    assert all(e.counters.new_setpoints == 10 for e in sim.emulators)
+    # each setpoint was applied at the very boundary it was computed for
+    assert sim.setpoint_latency_max() == pytest.approx(0.0, abs=1e-9)
+
+
+def test_phase_shifted_controllers_serve_the_next_boundary(rig):
+    """The controllers' 50 Hz timers need not be aligned with the boundaries."""
+    sim, controllers = rig
+    fresh_periods(sim, controllers, 10, phase=0.008)
+    assert sim.lockstep_timeouts == 0
+    assert sim.setpoint_latency_max() == pytest.approx(0.0, abs=1e-9)
+
+
+def test_repetitions_of_an_old_setpoint_do_not_count(rig):
+    """The bridge repeats the last setpoint at 50 Hz with ITS stamp: a stalled controller costs one timeout, then
+    the simulation runs on (no wait on a stream of repetitions); a new setpoint is waited for again."""
+    sim, controllers = rig
+    fresh_periods(sim, controllers, 5)
+    stalled_stamp = now_ms(sim) - 20  # the last computed setpoint (boundary 4)
+    for _ in range(6):
+        controllers.send(stalled_stamp)  # repetitions (twice a period, the bridge's tick and a late one)
+        sim.advance(PERIOD / 2)
+        controllers.send(stalled_stamp)
+        sim.advance(PERIOD / 2)
+    assert sim.lockstep_timeouts == 1
+    assert all(e.counters.setpoints == 5 + 12 and e.counters.new_setpoints == 5 for e in sim.emulators)
+    # the controllers come back: the stream is live again, waited for at each boundary, no more timeouts
+    fresh_periods(sim, controllers, 5)
+    assert sim.lockstep_timeouts == 1
+
+
+def test_a_setpoint_computed_before_the_previous_boundary_is_late(rig):
+    """A controller behind the simulation: a setpoint stamped T_{k-1} (new, but computed for the previous
+    period) does not serve T_k; the wait times out once and the stream stays live."""
+    sim, controllers = rig
+    fresh_periods(sim, controllers, 3, phase=0.008)  # stamps 8, 28, 48 ms: 48 serves the boundary at 60 ms
+    sim.advance(PERIOD)  # boundary 60 ms served; now at 80 ms
+    assert sim.lockstep_timeouts == 0 and now_ms(sim) == 80
+    controllers.send(60, uavs=[0])  # UAV 1's controller computed on the /clock of 60 ms, delivers only now
+    controllers.send(80, uavs=[1, 2])
+    sim.advance(PERIOD)  # boundary 80 ms: UAV 1 has nothing later than 60 ms
+    assert sim.lockstep_timeouts == 1
+    assert sim.emulators[0].counters.new_setpoints == 4
+    fresh_periods(sim, controllers, 3)  # still live: waited for, served
+    assert sim.lockstep_timeouts == 1 and sim.emulators[0].counters.new_setpoints == 7
+
+
+def test_zero_time_boot_ms_is_stamped_on_arrival_for_scripted_clients(rig):
+    sim, controllers = rig
+    for _ in range(10):
+        controllers.send(0)
+        sim.advance(PERIOD)
+    assert sim.lockstep_timeouts == 0
+    assert all(e.counters.new_setpoints == 10 for e in sim.emulators)
+    assert all(e.setpoint_latency.count == 0 for e in sim.emulators)  # no stamp, no latency sample
+
+
+def test_an_armed_offboard_uav_without_any_setpoint_is_waited_for_then_not(rig):
+    sim, controllers = rig
+    sim.advance(3 * PERIOD)
+    assert sim.lockstep_timeouts == 2  # boundaries 1 and 2 (the start, t = 0, is not a boundary)
+    controllers.send(now_ms(sim), uavs=[0, 1])  # UAV 3's controller never starts
+    sim.advance(PERIOD)
+    sim.advance(PERIOD)  # boundary 3: UAV 3 still expected (never got one); boundary 4: UAV 1, 2 not live
+    assert sim.lockstep_timeouts == 4
+
+
+def test_telemetry_time_boot_ms_is_the_sample_time(rig):
+    """PX4 boots at simulation time 0: the 50 Hz telemetry is stamped with the instant of its sample."""
+    sim, controllers = rig
+    controllers.send(0)  # contact: the emulators answer the sender
+    sim.advance(0.001)
+    controllers.telemetry_stamps("ATTITUDE_QUATERNION")
+    fresh_periods(sim, controllers, 5)
+    stamps = controllers.telemetry_stamps("ATTITUDE_QUATERNION")
+    assert len(stamps) == 3 * 5
+    assert sorted(set(stamps)) == [20 * k for k in range(1, 6)]
+    assert np.all(np.array(stamps) % 20 == 0)
