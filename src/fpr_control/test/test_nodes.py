@@ -59,10 +59,10 @@ class Graph:
 
     def close(self):
         self.executor.shutdown()
+        self.thread.join(timeout=2.0)  # no callback may run on a node being destroyed
         self.node.destroy_node()
         self.helper.destroy_node()
         rclpy.shutdown(context=self.context)
-        self.thread.join(timeout=2.0)
 
 
 def _local_state(uav_id=1, leg=0.8, nan=False):

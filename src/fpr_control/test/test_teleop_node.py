@@ -85,10 +85,10 @@ class Bench:
 
     def close(self):
         self.executor.shutdown()
+        self.thread.join(timeout=2.0)  # no callback may run on a node being destroyed
         self.node.destroy_node()
         self.helper.destroy_node()
         rclpy.shutdown(context=self.context)
-        self.thread.join(timeout=2.0)
 
 
 def _legs_near(bench, value, tolerance=1e-3):

@@ -65,10 +65,10 @@ def graph():
     spinner.start()
     yield context, helper, add
     executor.shutdown()
+    spinner.join(timeout=2.0)  # no callback may run on a node being destroyed
     for node in nodes:
         node.destroy_node()
     rclpy.shutdown(context=context)
-    spinner.join(timeout=2.0)
 
 
 def _image_msg(image, encoding="mono8"):
