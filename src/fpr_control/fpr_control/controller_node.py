@@ -10,10 +10,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import rclpy
 from fpr_model.parameters import default_parameters, load_parameters
 from fpr_model.rotations import quat_to_euler_zyx
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
@@ -27,7 +25,7 @@ from fpr_control.controller import (
     gains_from_dict,
 )
 from fpr_control.information import LocalEstimate, PeerInfo
-from fpr_control.node_utils import LOG_THROTTLE_S, describe
+from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
 from fpr_control.reference import TeleopReference
 from fpr_msgs.msg import (
     AttitudeThrustSetpoint,
@@ -234,22 +232,7 @@ class ControllerNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ControllerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(ControllerNode, args)
 
 
 if __name__ == "__main__":

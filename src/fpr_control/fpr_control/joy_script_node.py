@@ -8,14 +8,12 @@ from __future__ import annotations
 
 import os
 
-import rclpy
 import yaml
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from fpr_control.joy_timeline import timeline_from_dict
-from fpr_control.node_utils import describe
+from fpr_control.node_utils import describe, spin_node
 from fpr_control.teleop_node import default_mapping_file
 
 
@@ -72,22 +70,7 @@ class JoyScriptNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = JoyScriptNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(JoyScriptNode, args)
 
 
 if __name__ == "__main__":

@@ -6,13 +6,11 @@ on ``joy`` — for machines without the ROS ``joy`` package. Core: :mod:`fpr_con
 
 from __future__ import annotations
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from fpr_control.joystick_device import JoystickDevice
-from fpr_control.node_utils import describe
+from fpr_control.node_utils import describe, spin_node
 
 DEVICE_LOG_THROTTLE_S = 10.0  # [s] device errors repeat while unplugged: log rarely
 
@@ -65,6 +63,10 @@ class JoystickNode(Node):
         if changed or self._since_publish >= self._repeat_period:
             self._publish()
 
+    def destroy_node(self) -> None:
+        self.device.close()
+        super().destroy_node()
+
     def _publish(self) -> None:
         self._since_publish = 0.0
         state = self.device.state
@@ -79,23 +81,7 @@ class JoystickNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = JoystickNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        if node is not None:
-            node.device.close()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(JoystickNode, args)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
 
 LOG_THROTTLE_S = 2.0  # [s] per-cycle warnings: at most one per call site and period
 
@@ -10,3 +15,26 @@ LOG_THROTTLE_S = 2.0  # [s] per-cycle warnings: at most one per call site and pe
 def describe(text: str) -> ParameterDescriptor:
     """ParameterDescriptor with a description (every parameter is declared with one)."""
     return ParameterDescriptor(description=text)
+
+
+def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
+    """The nodes' main(): init rclpy, build the node, spin until Ctrl-C / SIGTERM, shut down cleanly.
+
+    A callback that races the shutdown (SIGINT/SIGTERM) and finds its context gone is not an error; any other
+    exception propagates.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()

@@ -13,14 +13,12 @@ from __future__ import annotations
 import math
 import os
 
-import rclpy
 import yaml
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy
 
-from fpr_control.node_utils import LOG_THROTTLE_S, describe
+from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
 from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
 from fpr_control.teleop_start import ReportedLegAngles, ReportedLegAnglesConfig
 from fpr_msgs.msg import InformationVector, TeleopCommand
@@ -137,22 +135,7 @@ class TeleopNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = TeleopNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(TeleopNode, args)
 
 
 if __name__ == "__main__":

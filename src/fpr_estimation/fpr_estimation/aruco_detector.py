@@ -12,16 +12,15 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import rclpy
 from fpr_model.calibration import CameraModel
 from fpr_model.rotations import rotmat_to_quat
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from fpr_estimation.aruco import ArucoConfig, ArucoPoseDetector, decode_image
+from fpr_estimation.node_utils import spin_node
 from fpr_msgs.msg import MarkerDetection
 
 _PARAMETERS = {
@@ -127,17 +126,4 @@ class ArucoDetectorNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = ArucoDetectorNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(ArucoDetectorNode, args)

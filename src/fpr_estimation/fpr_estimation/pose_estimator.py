@@ -15,12 +15,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import rclpy
 from fpr_model.calibration import CameraModel, EulerZxzPose, VisionCalibration
 from fpr_model.rotations import quat_to_rotmat
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu
@@ -28,6 +26,7 @@ from sensor_msgs.msg import Imu
 from fpr_estimation.ekf import FilterNoise
 from fpr_estimation.estimator import EstimatorConfig, PoseEstimatorCore
 from fpr_estimation.gating import GateConfig
+from fpr_estimation.node_utils import spin_node
 from fpr_msgs.msg import LocalState, MarkerDetection
 
 _PARAMETERS = {
@@ -184,17 +183,4 @@ class PoseEstimatorNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = PoseEstimatorNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a callback racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_node(PoseEstimatorNode, args)

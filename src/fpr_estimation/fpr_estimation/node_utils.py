@@ -1,0 +1,32 @@
+"""Small helpers shared by the fpr_estimation nodes (rclpy side only)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+
+def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
+    """The nodes' main(): init rclpy, build the node, spin until Ctrl-C / SIGTERM, shut down cleanly.
+
+    A callback that races the shutdown (SIGINT/SIGTERM) and finds its context gone is not an error; any other
+    exception propagates.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
