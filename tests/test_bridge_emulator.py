@@ -468,6 +468,10 @@ def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
         assert 1.0 <= armed_after <= 1.0 + OffboardConfig().command_retry_interval + 2 * CONTROL_PERIOD + CLOCK_STEP
         command["mode"] = TeleopCommand.MODE_FLY
         run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD and statuses[-1].offboard, 8.0, "OFFBOARD")
+        # the rotors take their load (and the battery sags) only in OFFBOARD: let one BATTERY_STATUS through so
+        # the bridge's voltage and the reported one agree before checking the thrust normalization
+        settle = sim.time
+        run_until(lambda: sim.time >= settle + 0.6, 1.0, "battery status")
         status = statuses[-1]
         # confirmed by PX4's HEARTBEAT: custom_mode OFFBOARD (main mode 6)
         assert status.px4_custom_mode == Px4MainMode.OFFBOARD << 16 and status.mode_name == "OFFBOARD"

@@ -177,7 +177,7 @@ def test_mavlink_before_the_first_clock_is_dropped_and_stamps_are_simulation_tim
     assert node.bridge.telemetry.mapper.offset is None and not node.bridge.machine.custom_mode_seen
     sim.run_until(lambda: statuses and statuses[-1].connected and imus, 1.0, "connected")
     # PX4's boot clock is the simulation clock here: offset ~0, IMU stamps are simulation times (a 50 ms grid)
-    assert -0.005 <= node.bridge.telemetry.mapper.offset <= 0.005
+    assert -0.020 <= node.bridge.telemetry.mapper.offset <= 0.005  # /clock lag under load: <= one control period
     stamp = Time.from_msg(imus[-1].header.stamp).nanoseconds * 1e-9
     assert sim.now - 0.1 <= stamp <= sim.now
     assert stamp == pytest.approx(round(stamp / 0.05) * 0.05, abs=0.005)
@@ -206,7 +206,9 @@ def test_fly_stream_rate_offboard_after_warmup_and_stale_stop(graph):
     # time_boot_ms is the SETPOINT's instant (its header stamp) on PX4's boot clock (here the simulation clock,
     # mapped through the telemetry offset), the same on every repetition: one value per published setpoint
     offset = node.bridge.telemetry.mapper.offset
-    assert offset is not None and -0.005 <= offset <= 0.001  # the fake's telemetry leads the /clock by <= 4 ms
+    # the fake's telemetry leads the bridge's /clock by a /clock step (4 ms), more when the executor lags on a
+    # loaded machine: the offset is biased early by at most one control period (CI measured -8 ms once)
+    assert offset is not None and -0.020 <= offset <= 0.001
     expected = np.round((np.array(sim.published) - offset) * 1000.0).astype(int)
     distinct = np.unique(boot_ms)
     assert np.array_equal(distinct, expected), (distinct[:5], expected[:5])

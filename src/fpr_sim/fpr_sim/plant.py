@@ -14,6 +14,11 @@ Block diagram of one step ``dt`` (default 1 ms):
    gear's normal force, :meth:`Plant._add_landing_gear_moments`); the quadrotors' attitude dynamics (2.92) are
    then advanced by RK4 with it.
 
+The legs' revolute joints have mechanical stops (scenario ``joint_stops``, default [10°, 92°]): outside them a
+stiff, damped, unilateral penalty moment (:func:`joint_stop_moment`) enters the θ_i rows of the generalized
+forces at every RK4 stage, so runaway runs (e.g. PX4's per-UAV AUTO.LAND folding the legs) end against a stop
+instead of diverging. Inside the stops nothing changes (the frozen oracle trajectories never reach them).
+
 The PX4 rate controllers get the land-detector flag of each quadrotor (:meth:`Plant.uav_landed`: its gear
 touches the ground), which freezes their integrators as PX4 does.
 
@@ -42,12 +47,26 @@ from fpr_sim.scalar_math import rotation_entries
 from fpr_sim.scenario import Scenario
 from fpr_sim.structure import PointForces, StructureDynamics, StructureState
 
-__all__ = ["GroundTruth", "Plant", "true_parameters"]
+__all__ = ["GroundTruth", "Plant", "joint_stop_moment", "true_parameters"]
 
 
 def true_parameters(scenario: Scenario) -> FprParameters:
     """The plant's own parameters: Table B.1 defaults overridden by ``scenario.plant`` (fpr_model names)."""
     return parameters_from_dict(dict(scenario.plant), base=default_parameters(scenario.n))
+
+
+def joint_stop_moment(theta: float, rate: float, lower: float, upper: float, stiffness: float,
+                      damping: float) -> float:
+    """Moment of a leg's mechanical joint stop [N m] about its joint axis, positive towards larger θ (the θ_i
+    row of the generalized forces of (2.86)); ``theta`` [rad], ``rate`` θ̇ [rad/s], stops [rad], ``stiffness``
+    [N m/rad], ``damping`` [N m s/rad]. Unilateral penalty (see :class:`~fpr_sim.scenario.JointStopConfig`):
+    ``max(0, k (lower − θ) − c θ̇)`` below ``lower``, ``min(0, k (upper − θ) − c θ̇)`` above ``upper``, else 0.
+    The compiled kernel (plant_kernel.c, joint_stop_moment) computes the same expression."""
+    if theta < lower:
+        return max(0.0, stiffness * (lower - theta) - damping * rate)
+    if theta > upper:
+        return min(0.0, stiffness * (upper - theta) - damping * rate)
+    return 0.0
 
 
 def _rotmat(q: np.ndarray) -> np.ndarray:
@@ -122,6 +141,10 @@ class Plant:
         wind = scenario.wind
         self._uav_drag, self._leg_drag, self._platform_drag = wind.uav_drag, wind.leg_drag, wind.platform_drag
         self._board_enabled = bool(self.environment.board.enabled)
+        stops = scenario.joint_stops
+        #: (lower, upper, stiffness, damping) of the legs' joint stops, None when disabled
+        self._joint_stops = ((float(stops.lower), float(stops.upper), float(stops.stiffness), float(stops.damping))
+                             if stops.enabled else None)
         self._end_effector = tuple(self.environment.board_end_effector.tolist())
         self._x_list = [0.0] * (13 + 2 * self.n)
         self._tips = None  # cached tip kinematics of _x_list
@@ -288,6 +311,7 @@ class Plant:
         joint = []
         c_list, s_list = [], []
         anchors_ground = self._anchor_list
+        stops = self._joint_stops
         for i in range(n):
             theta = x[7 + i]
             c = math.cos(theta)
@@ -350,7 +374,10 @@ class Plant:
                 m1 += h2 * mid0 - h0 * mid2
                 m2 += h0 * mid1 - h1 * mid0
             k0, k1, k2 = self._joint_axes[i]
-            joint.append(length * (k0 * (e1 * l2 - e2 * l1) + k1 * (e2 * l0 - e0 * l2) + k2 * (e0 * l1 - e1 * l0)))
+            moment = length * (k0 * (e1 * l2 - e2 * l1) + k1 * (e2 * l0 - e0 * l2) + k2 * (e0 * l1 - e1 * l0))
+            if stops is not None and not stops[0] <= theta <= stops[1]:  # the leg is in a mechanical stop
+                moment += joint_stop_moment(theta, xi[6 + i], *stops)
+            joint.append(moment)
         if ground:
             vc0 = r00 * u0 + r01 * u1 + r02 * u2
             vc1 = r10 * u0 + r11 * u1 + r12 * u2
@@ -583,7 +610,8 @@ class Plant:
         )
 
     def external_wrench(self) -> np.ndarray:
-        """True τ_e (6+n) of the disturbances now: board, scheduled wrench, wind, ground, payload weight.
+        """True τ_e (6+n) of the disturbances now: board, scheduled wrench, wind, ground, payload weight, and the
+        legs' joint-stop moments (the controllers' model has no stops: an observer sees them as disturbances).
 
         Layout [f_p (F0), m_p (Fp), joint moments] as (2.26); evaluated by the generalized-force map of the
         environment forces alone (thrust and the structure's own gravity excluded).
@@ -622,7 +650,17 @@ class Plant:
         pf = PointForces(np.array(points), np.array(forces) @ R, tip @ R, mids, moment, np.zeros(n))
         q_body = self.structure.generalized_forces(c, s, pf)
         q_body[:3] = R @ q_body[:3]
+        if self._joint_stops is not None:
+            q_body[6:] += self.joint_stop_moments()
         return q_body
+
+    def joint_stop_moments(self) -> np.ndarray:
+        """Moments of the legs' mechanical stops now [N m] (n,), :func:`joint_stop_moment` (0 when disabled)."""
+        n = self.n
+        x = self._x_list
+        if self._joint_stops is None:
+            return np.zeros(n)
+        return np.array([joint_stop_moment(x[7 + i], x[13 + n + i], *self._joint_stops) for i in range(n)])
 
 
 def _cross3(a, b) -> np.ndarray:

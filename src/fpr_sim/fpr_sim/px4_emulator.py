@@ -29,6 +29,34 @@ Behaviour (spec px4_ros_facts.md §1.3-§1.5):
   its ``time_boot_ms``);
 - offboard loss: no setpoint for COM_OF_LOSS_T (1 s) in OFFBOARD -> failsafe: AUTO.LOITER (level attitude,
   last thrust) for ``failsafe_hold_time``, then AUTO.LAND (level, reduced thrust) and disarm once landed;
+- outside OFFBOARD (PX4 parameters emulated, :class:`~fpr_sim.scenario.Px4Config` field in brackets), with no
+  RC (the FPR flies without one: COM_RCL_EXCEPT excepts OFFBOARD from the RC-loss failsafe):
+
+  * land detector: "landed" = the vehicle's landing gear touches the ground (the plant's contact; PX4's
+    MulticopterLandDetector also looks at the thrust and the vertical speed, which this does not model);
+  * landed outside OFFBOARD: the motors run at IDLE (normalized thrust 0, the actuator minimum: PWM_MAIN_MIN
+    spins the rotors without lift). PX4's position / altitude controllers (POSCTL, ALTCTL) keep a landed vehicle
+    at idle until a take-off is asked with the throttle stick, MANUAL/STABILIZED take the throttle from the
+    stick, the navigator's LOITER/LAND do not take off: without RC none of them lifts the vehicle. Arming
+    before OFFBOARD (fpr_px4_bridge arms, then switches ~1.2 s later) therefore leaves the robot on the ground;
+    the offboard setpoints streamed meanwhile are ignored as PX4 does outside OFFBOARD;
+  * COM_DISARM_PRFLT (``disarm_preflight_timeout``, 10 s): armed and not taken off (the land detector never
+    said airborne) for that long since arming -> auto-disarm, in every mode (PX4 Commander::checkForAutoDisarm);
+  * COM_DISARM_LAND (``land_disarm_delay``, 2 s): in AUTO.LAND, landed that long -> disarm; after a take-off,
+    landed that long in any mode but OFFBOARD -> disarm (not in OFFBOARD: there PX4's land detector also needs
+    a low thrust setpoint, which the gear-contact detector here cannot tell);
+  * RC loss (COM_RC_LOSS_T = ``rc_loss_timeout``, 0.5 s): airborne in a mode that needs RC (MANUAL,
+    STABILIZED, ALTCTL, POSCTL, ACRO) that long -> failsafe, NAV_RCL_ACT: PX4's default Return needs a global
+    position an indoor FPR does not have and falls back to Land, emulated as the offboard-loss chain: hold
+    (AUTO.LOITER, ``failsafe_hold_time``, standing in for COM_FAIL_ACT_T) then AUTO.LAND. Until then, and in
+    these modes in the air, the emulator flies level with the last thrust (it has no position controller);
+- AUTO.LAND (commanded, or the end of a failsafe) is PX4's per-vehicle land: each UAV descends LEVEL at
+  ``land_descent_thrust_ratio`` of its last thrust, at idle once its gear touches, and disarms COM_DISARM_LAND
+  later. It cannot land an FPR gracefully: the legs are held at their angle by the inward (horizontal)
+  components of the tilted thrusts, which level UAVs no longer produce, so the legs splay (fold towards flat)
+  while the robot sinks. From 2 m with legs at 60° the robot reaches the ground with the legs on their lower
+  joint stop (10°, scenario ``joint_stops``) and comes to rest there (test_px4_emulator.py). Operators should
+  descend under the FPR controllers (OFFBOARD) to near the ground and land / disarm there; LAND is a last resort;
 - telemetry from simulation time: ATTITUDE_QUATERNION, ATTITUDE, HIGHRES_IMU, LOCAL_POSITION_NED (own frame
   F0i, NED) at ``telemetry_rate``; HEARTBEAT, SYS_STATUS, BATTERY_STATUS at ``status_rate``;
 - boot clock: PX4 "boots" at simulation time 0, so ``time_boot_ms`` = :func:`boot_time_ms` (simulation time,
@@ -87,6 +115,8 @@ MAV_RESULT_TEMPORARILY_REJECTED = 1
 MAV_RESULT_DENIED = 2
 MAV_RESULT_UNSUPPORTED = 3
 MAV_STATE_STANDBY = 3
+#: modes that need RC sticks (PX4 mode requirement "manual control"): RC-loss failsafe when airborne in them
+_RC_MODES = (Px4MainMode.MANUAL, Px4MainMode.STABILIZED, Px4MainMode.ALTCTL, Px4MainMode.POSCTL, Px4MainMode.ACRO)
 _UNIT_TOLERANCE = 1e-3
 
 
@@ -106,7 +136,8 @@ class EmulatorCounters:
     garbage: int = 0  #: malformed frames (bad CRC, bad length, unknown message id)
     ignored: int = 0  #: valid MAVLink we do not handle, or addressed to another system
     commands: int = 0
-    failsafes: int = 0
+    failsafes: int = 0  #: offboard-loss and RC-loss failsafes
+    auto_disarms: int = 0  #: COM_DISARM_PRFLT / COM_DISARM_LAND disarms
 
 
 @dataclass
@@ -186,6 +217,12 @@ class Px4Emulator:
         self.rate_feedforward = np.zeros(3)
         self.rate_mode = False
         self.landed = True
+        #: PX4's _have_taken_off_since_arming: the land detector said airborne while armed
+        self.taken_off = False
+        self.armed_time: float | None = None  #: simulation time of the last arming [s]
+        #: (simulation time [s], reason) of the last auto-disarm (reason 'preflight' or 'landed'), or None
+        self.auto_disarm: tuple[float, str] | None = None
+        self._rc_loss_since: float | None = None
         #: boot-clock instant [ms] of the latest setpoint (its time_boot_ms; arrival time when that was 0)
         self.setpoint_time_ms: int | None = None
         self.setpoint_latency = SetpointLatency()
@@ -314,8 +351,7 @@ class Px4Emulator:
                     result = MAV_RESULT_ACCEPTED
                 elif self.stream_healthy():
                     result = MAV_RESULT_ACCEPTED
-                    self.armed = True
-                    self._landed_since = None
+                    self.arm(self.time)
                 else:
                     result = MAV_RESULT_TEMPORARILY_REJECTED
             else:
@@ -355,6 +391,15 @@ class Px4Emulator:
         self.main_mode, self.sub_mode = main, sub
         self._failsafe_since = None
 
+    def arm(self, sim_time: float) -> None:
+        """Arm at ``sim_time`` [s] (an accepted ARM, or a scenario that starts armed): resets the take-off flag
+        and the auto-disarm timers as PX4's commander does."""
+        self.armed = True
+        self.armed_time = float(sim_time)
+        self.taken_off = not self.landed
+        self._landed_since = None
+        self._rc_loss_since = None
+
     # ------------------------------------------------------------------------------------------ mode logic
     @property
     def custom_mode(self) -> int:
@@ -364,29 +409,38 @@ class Px4Emulator:
     def offboard(self) -> bool:
         return self.main_mode == Px4MainMode.OFFBOARD
 
-    def update(self, sim_time: float, landed: bool, attitude_world: np.ndarray) -> Px4Setpoint:
-        """Offboard-loss failsafe, landing and disarm logic at ``sim_time``; the setpoint to fly (world frame).
+    @property
+    def needs_rc(self) -> bool:
+        """The present mode flies on RC sticks (PX4's mode requirement "manual control")."""
+        return self.main_mode in _RC_MODES
 
-        ``landed``: the vehicle stands on the ground; ``attitude_world``: its true attitude (hold/land keep yaw).
+    def update(self, sim_time: float, landed: bool, attitude_world: np.ndarray) -> Px4Setpoint:
+        """PX4's mode logic at ``sim_time`` (module doc): offboard- and RC-loss failsafes, hold -> land,
+        auto-disarm; returns the setpoint to fly (world frame).
+
+        ``landed``: the land detector (the vehicle's gear touches the ground); ``attitude_world``: its true
+        attitude (hold/land keep yaw).
         """
         self.time = sim_time
         self.landed = landed
         cfg = self.config
+        if self.armed and not landed:
+            self.taken_off = True
         if self.armed and self.offboard and self._last_setpoint_time is not None and \
                 sim_time - self._last_setpoint_time > cfg.offboard_loss_timeout:
-            self.counters.failsafes += 1
-            self.main_mode, self.sub_mode = Px4MainMode.AUTO, Px4AutoSubMode.LOITER
-            self._failsafe_since = sim_time
+            self._start_failsafe(sim_time)
+        if self.armed and not landed and self.needs_rc:
+            self._rc_loss_since = sim_time if self._rc_loss_since is None else self._rc_loss_since
+            if sim_time - self._rc_loss_since > cfg.rc_loss_timeout:
+                self._start_failsafe(sim_time)
+        else:
+            self._rc_loss_since = None
         if self._failsafe_since is not None and self.main_mode == Px4MainMode.AUTO and \
                 self.sub_mode == Px4AutoSubMode.LOITER and sim_time - self._failsafe_since > cfg.failsafe_hold_time:
             self.sub_mode = Px4AutoSubMode.LAND
         is_land = self.main_mode == Px4MainMode.AUTO and self.sub_mode == Px4AutoSubMode.LAND
-        if self.armed and is_land and landed:
-            self._landed_since = sim_time if self._landed_since is None else self._landed_since
-            if sim_time - self._landed_since > cfg.land_disarm_delay:
-                self.armed = False
-        elif not landed:
-            self._landed_since = None
+        if self.armed:
+            self._check_auto_disarm(sim_time, landed, is_land)
         q_world_local = self._q_world_from_local
         if self.offboard and not self.rate_mode:
             quat = quat_multiply(q_world_local, self.quat_local)
@@ -397,10 +451,38 @@ class Px4Emulator:
         w, x, y, z = attitude_world
         yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         level = np.array([math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw)])
-        thrust = self.thrust * (cfg.land_descent_thrust_ratio if is_land else 1.0)
-        if landed and is_land:
-            thrust = 0.0
+        if landed:
+            thrust = 0.0  # idle: nothing takes off outside OFFBOARD without RC (module doc)
+        else:
+            thrust = self.thrust * (cfg.land_descent_thrust_ratio if is_land else 1.0)
         return Px4Setpoint(level, thrust, self.armed, np.zeros(3))
+
+    def _start_failsafe(self, sim_time: float) -> None:
+        """Offboard or RC loss: hold (AUTO.LOITER) now, AUTO.LAND after ``failsafe_hold_time``."""
+        self.counters.failsafes += 1
+        self.main_mode, self.sub_mode = Px4MainMode.AUTO, Px4AutoSubMode.LOITER
+        self._failsafe_since = sim_time
+        self._rc_loss_since = None
+
+    def _check_auto_disarm(self, sim_time: float, landed: bool, is_land: bool) -> None:
+        """COM_DISARM_PRFLT and COM_DISARM_LAND (module doc); called while armed."""
+        cfg = self.config
+        if landed and (is_land or (self.taken_off and not self.offboard)):
+            self._landed_since = sim_time if self._landed_since is None else self._landed_since
+            if sim_time - self._landed_since > cfg.land_disarm_delay:
+                self._disarm_automatically(sim_time, "landed")
+                return
+        else:
+            self._landed_since = None
+        armed_for = sim_time - (self.armed_time if self.armed_time is not None else 0.0)
+        if not self.taken_off and cfg.disarm_preflight_timeout > 0.0 and armed_for > cfg.disarm_preflight_timeout:
+            self._disarm_automatically(sim_time, "preflight")
+
+    def _disarm_automatically(self, sim_time: float, reason: str) -> None:
+        self.armed = False
+        self.counters.auto_disarms += 1
+        self.auto_disarm = (sim_time, reason)
+        self._landed_since = None
 
     # ------------------------------------------------------------------------------------------ send
     def _send(self, message) -> None:

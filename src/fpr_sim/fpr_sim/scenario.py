@@ -11,6 +11,12 @@ Example (see ``config/scenarios/*.yaml``)::
     plant: {platform_mass: 0.27}          # true parameters: overrides of thesis Table B.1
     payloads: [{mass: 0.3, attach_time: 10.0, release_time: 20.0}]
     wind: {velocity: [1.0, 0.0, 0.0]}
+    joint_stops: {lower: 0.1745, upper: 1.606}   # the legs' mechanical stops [rad] (default on; enabled: false)
+
+Landing: PX4's AUTO.LAND (and the failsafes that end in it) lands each UAV level on its own; the legs then lose
+the inward thrust component that holds them and splay onto their lower joint stop while the robot sinks
+(fpr_sim.px4_emulator). Scenarios and operators should descend under the FPR controllers and land / disarm
+near the ground.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ __all__ = [
     "GroundConfig",
     "Gust",
     "InitialState",
+    "JointStopConfig",
     "PayloadEvent",
     "Px4Config",
     "QuadrotorConfig",
@@ -92,7 +99,8 @@ class BatteryConfig:
 
 @dataclass
 class Px4Config:
-    """PX4-like attitude controller (3.39)-(3.40) gains and offboard rules, identical on every UAV."""
+    """PX4-like attitude controller (3.39)-(3.40) gains, offboard rules and the PX4 parameters of the emulated
+    mode logic (names in the field comments; see fpr_sim.px4_emulator), identical on every UAV."""
 
     attitude_p_gain: list[float] = field(default_factory=lambda: [6.5, 6.5, 2.8])  #: 2/τ·... : rate = P·2·q_err [1/s]
     rate_p_gain: list[float] = field(default_factory=lambda: [0.9, 0.9, 0.6])  #: K_P [N m s/rad]
@@ -106,7 +114,9 @@ class Px4Config:
     offboard_warmup: float = 1.0  #: stream duration required before OFFBOARD or arming [s]
     failsafe_hold_time: float = 2.0  #: hold (last attitude, hover thrust) before landing [s]
     land_descent_thrust_ratio: float = 0.9  #: LAND: thrust = ratio · hover thrust of the attached UAV
-    land_disarm_delay: float = 2.0  #: disarm after this long on the ground in LAND [s]
+    land_disarm_delay: float = 2.0  #: COM_DISARM_LAND: disarm after this long landed (LAND, or after flight) [s]
+    disarm_preflight_timeout: float = 10.0  #: COM_DISARM_PRFLT: disarm if armed this long without take-off [s]
+    rc_loss_timeout: float = 0.5  #: COM_RC_LOSS_T: airborne in a manual-like mode, no RC -> failsafe after [s]
     yaw_offsets: list[float] = field(default_factory=lambda: [0.0])  #: F0i yaw offset per UAV [rad]
     telemetry_rate: float = 50.0  #: ATTITUDE/…/HIGHRES_IMU stream rate [Hz]
     status_rate: float = 2.0  #: HEARTBEAT, SYS_STATUS, BATTERY_STATUS rate [Hz]
@@ -149,6 +159,41 @@ class GroundConfig:
     friction: float = 0.8  #: Coulomb coefficient
     tangential_stiffness: float = 5000.0  #: stick spring [N/m]
     tangential_damping: float = 150.0  #: [N s/m]
+
+
+@dataclass
+class JointStopConfig:
+    """Mechanical stops of the legs' revolute joints (angles θ_i): a stiff, damped penalty moment about
+    the joint axis outside ``[lower, upper]``, unilateral (it pushes back, never pulls):
+
+    ``τ_i = max(0, k (lower − θ_i) − c θ̇_i)`` for θ_i < lower, ``τ_i = min(0, k (upper − θ_i) − c θ̇_i)`` for
+    θ_i > upper, 0 between (an internal moment between the leg and the platform: it enters only the θ_i row of
+    the generalized forces of (2.86)).
+
+    Range [10°, 92°]: the model and its Jacobian are valid for θ ∈ (0, 90°] (θ = 0: the leg in the platform
+    plane; J is invertible on [0, π/2] [Six 2018b], thesis §2.4.1, errata §0.1) and the thesis gives no stop
+    angles for the prototype's leg bearings (its only joint-stop figure is the spherical joints' tilt cone
+    γ = 35°, (5.23)). Both ends of that range are numerically hostile, which sets the stops (measured with the
+    Table B.1 structure, StructureDynamics.body_mass_matrix):
+
+    - towards θ = 0 the mass matrix degenerates: a leg's effective inertia 1/(M̃⁻¹)_θθ is 0.53 kg m² at 60°,
+      0.026 at 10°, 0.002 at 2° (smallest eigenvalue of M̃ 0.26, 0.012, 0.0009). With a 2° stop an AUTO.LAND
+      from 2 m ended chattering on the flat legs (θ̇ ≈ 0.2 rad/s after 10 s), and diverged at touch-down with
+      c = 40 (explicit RK4: c·dt/I ≈ 20 ≫ 2.8); with 10° it comes to rest;
+    - at θ = arccos(−r/l) = 97° the three tips meet under the platform centre (M̃'s smallest eigenvalue 0.002):
+      a 95° stop leaves no room for its penetration, 92° leaves 5°. (The prototype's quadrotors, 34 cm frames
+      with 8" propellers, would touch each other near 80° already; flights stay within 45°-75°.)
+
+    Stiffness and damping: k = 2000 N m/rad holds the largest runaway moment (f_max·l ≈ 40 N m) within ~1.2°;
+    c = 10 N m s/rad keeps c·dt/I ≤ 0.5 and ω·dt ≤ 0.35 down to the light end (I ≈ 0.02 kg m²), well inside
+    the 1 kHz RK4's stability region.
+    """
+
+    enabled: bool = True
+    lower: float = math.radians(10.0)  #: [rad]
+    upper: float = math.radians(92.0)  #: [rad]
+    stiffness: float = 2000.0  #: k [N m/rad]
+    damping: float = 10.0  #: c [N m s/rad]
 
 
 @dataclass
@@ -219,6 +264,7 @@ class Scenario:
     sensors: SensorConfig = field(default_factory=SensorConfig)
     cameras: CameraConfig = field(default_factory=CameraConfig)
     ground: GroundConfig = field(default_factory=GroundConfig)
+    joint_stops: JointStopConfig = field(default_factory=JointStopConfig)
     board: BoardConfig = field(default_factory=BoardConfig)
     wind: WindConfig = field(default_factory=WindConfig)
     payloads: list[PayloadEvent] = field(default_factory=list)
@@ -317,6 +363,9 @@ def scenario_from_dict(data: dict | None) -> Scenario:
             raise ValueError(f"battery.{name}: must be > 0")
     if scenario.quadrotor.landing_gear_radius <= 0.0 or scenario.quadrotor.landing_gear_height < 0.0:
         raise ValueError("quadrotor.landing_gear_radius must be > 0 and quadrotor.landing_gear_height >= 0")
+    stops = scenario.joint_stops
+    if not 0.0 <= stops.lower < stops.upper <= math.pi or stops.stiffness < 0.0 or stops.damping < 0.0:
+        raise ValueError(f"joint_stops: need 0 <= lower < upper <= π [rad] and stiffness, damping >= 0, got {stops}")
     if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
         raise ValueError("px4.controller_rate and cameras.rate must be > 0")
     return scenario

@@ -109,13 +109,13 @@ class Simulation:
         quats = plant.default_uav_attitudes(forces)
         f_max = plant.fleet.max_thrust()
         for i, emulator in enumerate(self.emulators):
-            emulator.armed = True
+            emulator.landed = False
+            emulator.arm(0.0)  # in the air: taken off (no pre-flight auto-disarm)
             emulator.main_mode, emulator.sub_mode = Px4MainMode.OFFBOARD, 0
             emulator.quat_local = self.sensors.world_to_local_quat(i, quats[i])
             emulator.thrust = float(np.linalg.norm(forces[i]) / f_max[i])
             emulator._last_setpoint_time = 0.0
             emulator._stream_start = -emulator.config.offboard_warmup
-            emulator.landed = False
 
     # ------------------------------------------------------------------------------------------------
     @property

@@ -14,12 +14,14 @@ import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
 from fpr_msgs.msg import FprState, MarkerDetection
+from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
 from fpr_sim.scenario import load_scenario
 from fpr_sim.simulation import Simulation, SimulationOptions
@@ -94,6 +96,7 @@ class SimulatorNode(Node):
             f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
             f"sending to {self.sim.remote_ports}, "
             f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep}")
+        self.get_logger().info(f"plant kernel: {kernel_summary(self.sim.plant.kernel)}")
 
     # ------------------------------------------------------------------------------------------------
     def run(self) -> None:
@@ -108,6 +111,8 @@ class SimulatorNode(Node):
         if self._wall_start is None:
             self._wall_start, self._sim_start = time.monotonic(), self.sim.time
         self.sim.advance(self.clock_period)
+        if not rclpy.ok(context=self.context):
+            return False  # shut down (SIGINT/SIGTERM) while stepping: publishing now would raise
         t = self.sim.time
         self.clock_pub.publish(Clock(clock=_stamp(t)))
         if t + 1e-9 >= self._next_truth:
@@ -203,13 +208,19 @@ def _desc(text: str):
 
 def main(args=None) -> None:
     rclpy.init(args=args)
-    node = SimulatorNode()
+    node = None
     try:
+        node = SimulatorNode()
         node.run()
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a publish racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
     finally:
-        node.destroy_node()
+        if node is not None:
+            node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
 

@@ -99,3 +99,65 @@ def test_hover_start_holds_the_hover_thrust_with_the_battery_under_load():
         assert plant.fleet.thrust() == pytest.approx(hover, rel=2e-3)
     finally:
         sim.close()
+
+
+def _folding_run(stops: dict, seconds: float = 3.0, kernel: str | None = None):
+    """Hovering at legs 60°, no ground, every PX4 flying LEVEL at 90 % of its hover share (what a per-UAV
+    AUTO.LAND does): the legs lose the inward thrust component that held them and fold. Returns the plant and
+    the extreme leg angles [rad] and leg rates seen."""
+    plant = Plant(scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": np.radians(60.0)},
+                                      "ground": {"enabled": False}, "joint_stops": stops}), kernel=kernel)
+    q = plant.state.configuration()
+    thrust = 0.9 * np.linalg.norm(thrusts_from_wrench(plant.params, q, gravity(plant.params, q)), axis=1)
+    level = plant.default_uav_attitudes()
+    low, high, finite = np.inf, -np.inf, True
+    for k in range(int(round(seconds / plant.dt))):
+        if k % 4 == 0:
+            plant.set_command(AttitudeCommand(level, thrust / plant.fleet.max_thrust(), np.ones(3, dtype=bool)))
+        plant.step()
+        angles = plant.state.leg_angles
+        finite = finite and bool(np.isfinite(plant._x).all() and np.isfinite(plant.fleet.quat).all())
+        if not finite:
+            break
+        low, high = min(low, angles.min()), max(high, angles.max())
+    return plant, low, high, finite
+
+
+def test_joint_stops_hold_folding_legs_and_keep_the_state_finite():
+    """Integration defect: nothing limited the revolute leg joints, so a run that folds the legs (per-UAV
+    AUTO.LAND: level attitudes, reduced thrust) sent them through −530° and the plant diverged. With the
+    mechanical stops (default [10°, 92°], JointStopConfig) the legs end against the lower stop, within a small
+    penetration, and the state stays finite; the stop moment is reported in the true external wrench."""
+    free, free_low, _, _ = _folding_run({"enabled": False})
+    assert free_low < np.radians(-30.0)  # without stops the legs fold through the platform plane
+    plant, low, high, finite = _folding_run({})
+    stops = plant.scenario.joint_stops
+    assert finite
+    penetration = np.radians(2.0)
+    assert stops.lower - penetration < low and high < stops.upper + penetration
+    assert low < stops.lower + np.radians(1.0)  # it did reach the stop
+    moments = plant.joint_stop_moments()
+    assert np.allclose(plant.external_wrench()[6:], moments + _without_stops(plant).external_wrench()[6:])
+    print(f"\n[stops] folding run: legs {np.degrees(low):.2f}°..{np.degrees(high):.2f}° with stops at "
+          f"{np.degrees(stops.lower):.0f}°/{np.degrees(stops.upper):.0f}° (without stops: "
+          f"{np.degrees(free_low):.0f}°); stop moments now {np.round(moments, 2)} N m")
+
+
+def _without_stops(plant: Plant) -> Plant:
+    """A plant in the same state with the stops disabled (for the wrench comparison)."""
+    data = {"initial_state": {"mode": "hover"}, "ground": {"enabled": False}, "joint_stops": {"enabled": False}}
+    other = Plant(scenario_from_dict(data), kernel="python")
+    other.set_state(plant.state)
+    return other
+
+
+def test_joint_stop_moment_is_a_unilateral_damped_penalty():
+    from fpr_sim.plant import joint_stop_moment
+
+    args = (0.2, 1.5, 1000.0, 10.0)
+    assert joint_stop_moment(0.1, 0.0, *args) == pytest.approx(100.0)  # pushes up below the lower stop
+    assert joint_stop_moment(0.1, -2.0, *args) == pytest.approx(120.0)  # more while still entering
+    assert joint_stop_moment(0.19, 5.0, *args) == 0.0  # leaving fast: never pulls
+    assert joint_stop_moment(1.6, 0.0, *args) == pytest.approx(-100.0)
+    assert joint_stop_moment(1.51, -5.0, *args) == 0.0
+    assert joint_stop_moment(0.8, 3.0, *args) == 0.0  # free between the stops

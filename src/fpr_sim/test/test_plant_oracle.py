@@ -18,6 +18,12 @@ History of data/plant_oracle.npz (regenerate ONLY after a deliberate change of t
    This changes the joint-offset moment (2.93) and hence every flying case. Same change: the default rate-loop
    integral gains to PX4's I/P ratio (rate_i_gain 0.2 -> 1.2 on roll/pitch, 0.1 -> 0.6 on yaw).
 
+NOT regenerated when the legs' mechanical joint stops were added (scenario ``joint_stops``, default [10°, 92°]):
+inside the stops the physics is unchanged (the stop moment is added only outside them), and five cases stay
+within 45°-88°. board_push (legs to −107°) and payload_drop (−221° to +132°) do leave that range, so they run
+with the stops disabled (plant_oracle_cases._NO_STOPS) and keep pinning the unstopped dynamics; the data file is
+the one of step 3, reproduced unchanged by both kernels.
+
 Both implementations of the plant replay the same frozen reference: the pure-Python one (the reference code)
 and the optional compiled kernel (fpr_sim._kernels, C): ``kernel`` is parametrized. The compiled variant fails
 (does not skip) when a C compiler exists but the kernel is missing, so a broken build cannot pass unseen.

@@ -257,3 +257,181 @@ def test_attitude_step_response_matches_the_p_gain_time_constant():
     finally:
         sim.close()
         client.close()
+
+
+def _swarm(scenario: dict):
+    """The scenario with three listening clients, one per UAV, each connected to its emulator: (sim, clients)."""
+    clients = [_listening_client() for _ in range(3)]
+    sim = Simulation(scenario_from_dict(scenario),
+                     SimulationOptions(local_base_port=0, lockstep=False,
+                                       remote_ports=tuple(c.port.getsockname()[1] for c in clients)))
+    try:
+        for client in clients:
+            _connect(client, sim)
+    except BaseException:
+        sim.close()
+        for client in clients:
+            client.close()
+        raise
+    return sim, clients
+
+
+def _ground_swarm(seconds_of_stream: float, thrust: float):
+    """Ground scenario, three clients streaming ``thrust`` setpoints at 20 Hz for ``seconds_of_stream``."""
+    sim, clients = _swarm({"initial_state": {"mode": "ground"}})
+    try:
+        _stream(sim, clients, seconds_of_stream, thrust)
+    except BaseException:
+        sim.close()
+        for client in clients:
+            client.close()
+        raise
+    return sim, clients
+
+
+def _stream(sim, clients, seconds: float, thrust: float, record=None) -> None:
+    """Advance ``seconds`` while every client streams a level ``thrust`` setpoint at 20 Hz (as fpr_px4_bridge
+    does while WARMUP), reading what comes back; ``record(sim)`` after each 50 ms."""
+    for _ in range(int(round(seconds / 0.05))):
+        for uav, client in enumerate(clients, start=1):
+            client.mav.set_attitude_target_send(
+                time_boot_ms=0, target_system=uav, target_component=1, type_mask=7,
+                q=[float(v) for v in quat_enu_flu_to_ned_frd(np.array([1.0, 0.0, 0.0, 0.0]))],
+                body_roll_rate=0.0, body_pitch_rate=0.0, body_yaw_rate=0.0, thrust=thrust)
+        sim.advance(0.05)
+        for client in clients:
+            _drain(client)
+        if record is not None:
+            record(sim)
+
+
+def test_armed_in_posctl_on_the_ground_idles_and_disarms_after_com_disarm_prflt():
+    """Integration defect: armed but not yet in OFFBOARD (fpr_px4_bridge arms, then switches ~1.2 s later), the
+    emulated PX4 used to fly the streamed offboard thrust level in POSCTL (~11 N per UAV): after ~1.5 s the robot
+    lifted off, its legs broke through and it ended 240 m up. PX4 without RC keeps a landed vehicle at idle in
+    POSCTL and disarms it COM_DISARM_PRFLT = 10 s after arming if it never took off."""
+    from fpr_model.rotations import quat_to_euler_zyx
+
+    sim, clients = _ground_swarm(1.2, thrust=0.4)  # ~15 N per UAV if it were flown, > the ~11 N hover share
+    try:
+        for uav, client in enumerate(clients, start=1):
+            client.mav.command_long_send(target_system=uav, target_component=1, command=ARM, confirmation=0,
+                                         param1=1.0, param2=0, param3=0, param4=0, param5=0, param6=0, param7=0)
+        emulators = sim.emulators
+        for _ in range(100):
+            _stream(sim, clients, 0.05, thrust=0.4)
+            if all(e.armed for e in emulators):
+                break
+        assert all(e.armed for e in emulators) and all(e.main_mode == 3 for e in emulators)  # POSCTL
+        armed_at = [e.armed_time for e in emulators]
+        start = sim.ground_truth().state
+        uav_z0 = sim.ground_truth().uav_positions[:, 2].copy()
+        worst = {"position": 0.0, "tilt": 0.0, "legs": 0.0, "uav_z": 0.0, "thrust": 0.0, "armed_thrust": 0.0}
+
+        def record(s) -> None:
+            truth = s.ground_truth()
+            state = truth.state
+            roll, pitch, _ = quat_to_euler_zyx(state.quat)
+            worst["position"] = max(worst["position"], float(np.linalg.norm(state.position - start.position)))
+            worst["tilt"] = max(worst["tilt"], abs(roll), abs(pitch))
+            worst["legs"] = max(worst["legs"], float(np.abs(state.leg_angles - start.leg_angles).max()))
+            worst["uav_z"] = max(worst["uav_z"], float(np.abs(truth.uav_positions[:, 2] - uav_z0).max()))
+            worst["thrust"] = max(worst["thrust"], float(truth.uav_thrusts.max()))
+            if all(e.armed for e in s.emulators):
+                worst["armed_thrust"] = max(worst["armed_thrust"], float(truth.uav_thrusts.max()))
+
+        _stream(sim, clients, 12.0, thrust=0.4, record=record)  # stays in POSCTL: no OFFBOARD request
+        assert worst["position"] < 0.01 and worst["uav_z"] < 0.01
+        assert worst["tilt"] < np.radians(1.0) and worst["legs"] < np.radians(1.0)
+        assert worst["thrust"] < 0.1  # [N] idle (the ~11 N hover share would lift it)
+        for emulator, t_arm in zip(emulators, armed_at, strict=True):
+            assert not emulator.armed and not emulator.taken_off
+            time_disarmed, reason = emulator.auto_disarm
+            assert reason == "preflight"
+            assert time_disarmed - t_arm == pytest.approx(emulator.config.disarm_preflight_timeout, abs=0.01)
+            assert emulator.counters.failsafes == 0
+        print(f"\n[posctl] 12 s armed in POSCTL: platform moved {1000 * worst['position']:.2f} mm, tilt "
+              f"{np.degrees(worst['tilt']):.3f} deg, legs {np.degrees(worst['legs']):.3f} deg, max rotor thrust "
+              f"{worst['thrust']:.4f} N; disarmed {emulators[0].auto_disarm[0] - armed_at[0]:.3f} s after arming")
+    finally:
+        sim.close()
+        for client in clients:
+            client.close()
+
+
+def test_airborne_in_posctl_without_rc_triggers_the_rc_loss_failsafe():
+    """Switched from OFFBOARD to POSCTL in the air (no RC): COM_RC_LOSS_T = 0.5 s later the RC-loss failsafe
+    holds (AUTO.LOITER), then lands (AUTO.LAND, NAV_RCL_ACT's Return falling back to Land indoors)."""
+    client = _listening_client()
+    sim = _simulation(scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.9, "armed": True},
+                                          "ground": {"enabled": False}}), client)
+    try:
+        emulator = sim.emulators[0]
+        hover_local, thrust = emulator.quat_local.copy(), emulator.thrust
+        _connect(client, sim)
+        for _ in range(5):
+            _setpoint(client, hover_local, thrust)
+            sim.advance(0.02)
+        _command(client, SET_MODE, 1.0, 3)  # POSCTL
+        assert _ack(client, sim, SET_MODE) == 0
+        switched = sim.time
+        assert emulator.main_mode == 3 and emulator.armed and emulator.taken_off
+        while emulator.main_mode == 3 and sim.time < switched + 2.0:
+            _setpoint(client, hover_local, thrust)  # offboard setpoints do not count outside OFFBOARD
+            sim.advance(0.01)
+            _drain(client)
+        assert emulator.custom_mode == (4 << 16 | 3 << 24)  # AUTO.LOITER (hold)
+        assert sim.time - switched == pytest.approx(emulator.config.rc_loss_timeout, abs=0.03)
+        assert emulator.counters.failsafes == 1 and emulator.armed
+        sim.advance(emulator.config.failsafe_hold_time + 0.05)
+        assert emulator.custom_mode == (4 << 16 | 6 << 24)  # AUTO.LAND
+        assert emulator.counters.failsafes == 1
+    finally:
+        sim.close()
+        client.close()
+
+
+def test_auto_land_of_the_whole_fpr_from_2_m_ends_resting_and_disarmed():
+    """PX4's per-UAV AUTO.LAND cannot land an FPR gracefully: each UAV descends LEVEL, the legs lose the inward
+    thrust component that held them and fold while the robot falls (before the joint stops, −530° and a
+    diverging plant). With the stops it must at least end finite, at rest, on the ground and disarmed
+    (COM_DISARM_LAND), the legs within the stops (± a small penetration)."""
+    from fpr_model.rotations import quat_to_euler_zyx
+
+    sim, clients = _swarm({"initial_state": {"mode": "hover", "position": [0.0, 0.0, 2.0],
+                                             "leg_angles": np.radians(60.0), "armed": True}})
+    try:
+        stops = sim.scenario.joint_stops
+        for uav, client in enumerate(clients, start=1):
+            client.mav.command_long_send(target_system=uav, target_component=1, command=SET_MODE,
+                                         confirmation=0, param1=1.0, param2=4, param3=6, param4=0, param5=0,
+                                         param6=0, param7=0)
+        commanded = sim.time
+        low, high, finite = np.inf, -np.inf, True
+        for _ in range(120):  # 12 s
+            sim.advance(0.1)
+            for client in clients:
+                _drain(client)
+            truth = sim.ground_truth()
+            angles = truth.state.leg_angles
+            finite = finite and bool(np.isfinite(sim.plant._x).all() and np.isfinite(truth.uav_quats).all())
+            low, high = min(low, angles.min()), max(high, angles.max())
+        assert all(e.custom_mode == (4 << 16 | 6 << 24) for e in sim.emulators)  # AUTO.LAND
+        state = sim.ground_truth().state
+        roll, pitch, _ = quat_to_euler_zyx(state.quat)
+        assert finite
+        assert stops.lower - np.radians(2.0) < low and high < stops.upper + np.radians(2.0)
+        assert np.abs(state.velocity).max() < 1e-3 and np.abs(state.rate).max() < 1e-3
+        assert np.abs(state.leg_rates).max() < 1e-3
+        assert np.allclose(sim.ground_truth().uav_positions[:, 2], sim.plant.gear, atol=0.01)  # on their gear
+        for emulator in sim.emulators:
+            assert not emulator.armed and emulator.auto_disarm[1] == "landed"
+            assert emulator.auto_disarm[0] - commanded < 6.0
+        print(f"\n[land] AUTO.LAND from 2 m: legs {np.degrees(low):.1f}°..{np.degrees(high):.1f}°, rests at "
+              f"z = {state.position[2]:.3f} m, legs {np.round(np.degrees(state.leg_angles), 1)}°, roll "
+              f"{np.degrees(roll):.2f}°, pitch {np.degrees(pitch):.2f}°; disarmed "
+              f"{[round(e.auto_disarm[0] - commanded, 2) for e in sim.emulators]} s after LAND")
+    finally:
+        sim.close()
+        for client in clients:
+            client.close()

@@ -47,3 +47,18 @@ def test_plant_overrides_reach_true_parameters():
     assert params.platform_mass == 0.4 and params.leg_length == 1.0
     with pytest.raises(ValueError, match="valid keys"):
         true_parameters(scenario_from_dict({"plant": {"platform_mas": 0.4}}))
+
+
+def test_joint_stops_keys_and_ranges():
+    default = scenario_from_dict({}).joint_stops
+    assert default.enabled and 0.0 < default.lower < default.upper <= 1.7
+    disabled = scenario_from_dict({"joint_stops": {"enabled": False}}).joint_stops
+    assert not disabled.enabled
+    custom = scenario_from_dict({"joint_stops": {"lower": 0.2, "upper": 1.5, "stiffness": 500, "damping": 2}})
+    assert (custom.joint_stops.lower, custom.joint_stops.stiffness) == (0.2, 500.0)
+    with pytest.raises(ValueError, match=r"joint_stops: unknown key\(s\) \['stifness'\].*'stiffness'"):
+        scenario_from_dict({"joint_stops": {"stifness": 100.0}})
+    for bad in ({"lower": 1.0, "upper": 0.5}, {"lower": -0.1}, {"upper": 4.0}, {"stiffness": -1.0},
+                {"damping": -0.5}):
+        with pytest.raises(ValueError, match="joint_stops"):
+            scenario_from_dict({"joint_stops": bad})

@@ -53,3 +53,44 @@ def test_simulator_node_publishes_clock_truth_and_images():
         assert images and images[-1].encoding == "mono8" and images[-1].width == 640
     finally:
         rclpy.shutdown()
+
+
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])
+def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
+    """Integration defect: SIGTERM/SIGINT during run() shut the context down while step() published ->
+    RCLError "publisher's context is invalid" traceback. The node must exit with status 0 and no traceback, and
+    say at start which plant kernel runs."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from fpr_sim._kernels import KERNEL_ENV, resolve_kernel
+
+    rclpy.init()
+    process = None
+    try:
+        listener = rclpy.create_node("signal_listener")
+        clocks = []
+        listener.create_subscription(Clock, "/clock", clocks.append, 50)
+        process = subprocess.Popen(
+            [sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", "real_time_factor:=0.0",
+             "-p", "local_base_port:=0", "-p", "remote_base_port:=0", "-p", "emulated_cameras:=true"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+        deadline = time.monotonic() + 30.0
+        while len(clocks) < 20:  # running (stepping and publishing as fast as it can)
+            rclpy.spin_once(listener, timeout_sec=0.05)
+            assert process.poll() is None, process.stdout.read()
+            assert time.monotonic() < deadline, "no /clock from the simulator process"
+        process.send_signal(getattr(signal, signal_name))
+        output, _ = process.communicate(timeout=20.0)
+        listener.destroy_node()
+    finally:
+        if process is not None and process.poll() is None:
+            process.kill()
+            process.communicate()
+        rclpy.shutdown()
+    assert process.returncode == 0, output
+    assert "Traceback" not in output and "RCLError" not in output, output
+    expected = resolve_kernel(os.environ.get(KERNEL_ENV), 3)
+    assert f"plant kernel: {expected} (" in output, output

@@ -36,12 +36,12 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["KERNEL_CHOICES", "KERNEL_ENV", "KernelStatus", "PlantKernel", "QuadKernel", "StructureKernel",
-           "compiler_available", "kernel_status", "resolve_kernel"]
+           "compiler_available", "kernel_status", "kernel_summary", "resolve_kernel"]
 
 KERNEL_ENV = "FPR_SIM_KERNEL"
 KERNEL_CHOICES = ("auto", "compiled", "python")
 #: must equal FPR_KERNEL_ABI in plant_kernel.c
-_ABI = 1
+_ABI = 2
 _LIBRARY_STEM = "_fpr_plant_kernel"
 _SOURCE = Path(__file__).with_name("plant_kernel.c")
 _LOG = logging.getLogger("fpr_sim.kernels")
@@ -93,7 +93,10 @@ def _plant_model_type(max_n: int) -> type[ctypes.Structure]:
                     ("platform_drag", ctypes.c_double), ("board_enabled", ctypes.c_int),
                     ("board_normal", vec), ("board_point", vec), ("board_stiffness", ctypes.c_double),
                     ("board_damping", ctypes.c_double), ("board_friction", ctypes.c_double),
-                    ("end_effector", vec), ("quad", FprQuadModel)]
+                    ("end_effector", vec), ("joint_stops_enabled", ctypes.c_int),
+                    ("joint_stop_lower", ctypes.c_double), ("joint_stop_upper", ctypes.c_double),
+                    ("joint_stop_stiffness", ctypes.c_double), ("joint_stop_damping", ctypes.c_double),
+                    ("quad", FprQuadModel)]
 
     return FprPlantModel
 
@@ -184,6 +187,20 @@ def compiler_available() -> bool:
 def kernel_status() -> KernelStatus:
     """Whether the compiled kernel is available in this process (loaded once, cached)."""
     return _load()[1]
+
+
+def kernel_summary(selected: str) -> str:
+    """One line for a start-up log: the plant kernel that runs (``selected``: 'compiled' or 'python', e.g.
+    ``Plant.kernel``) and why (the library loaded, ``$FPR_SIM_KERNEL``, or why the compiled one is missing)."""
+    requested = os.environ.get(KERNEL_ENV, "auto").strip().lower() or "auto"
+    status = kernel_status()
+    if selected == "compiled":
+        return f"compiled ({status.reason}, ${KERNEL_ENV}={requested})"
+    if requested == "python":
+        return f"python (${KERNEL_ENV}=python)"
+    if status.available:
+        return "python (the robot has more legs than the compiled kernel's arrays)"
+    return f"python ({status.reason})"
 
 
 _announced = False
@@ -417,6 +434,11 @@ class PlantKernel:
         model.board_damping = float(board.damping)
         model.board_friction = float(board.friction)
         _fill(model.end_effector, plant._end_effector)
+        stops = plant._joint_stops
+        model.joint_stops_enabled = int(stops is not None)
+        if stops is not None:
+            (model.joint_stop_lower, model.joint_stop_upper, model.joint_stop_stiffness,
+             model.joint_stop_damping) = stops
         model.quad = _quad_model(plant.fleet)
         if float(scenario.quadrotor.arm_length) != model.quad.arm:
             raise RuntimeError("landing-gear arm differs from the fleet's arm length")

@@ -2,7 +2,7 @@
  * fpr_sim compiled kernel: the 1 kHz plant step in plain C99 (loaded with ctypes, no Python C-API).
  *
  * This is a line-by-line port of the Python reference in fpr_sim/plant.py (Plant.step, Plant._derivative,
- * Plant._add_landing_gear_moments), fpr_sim/structure.py (StructureDynamics.accelerate),
+ * Plant._add_landing_gear_moments, joint_stop_moment), fpr_sim/structure.py (StructureDynamics.accelerate),
  * fpr_sim/environment.py (GroundContacts.point_force / update_anchors, Environment.board_force_scalar) and
  * fpr_sim/quadrotor.py (QuadrotorFleet.control / step, mix_one, Battery.update). The Python code stays the
  * reference (and the fallback); every function below names its Python original, which names the thesis
@@ -28,7 +28,7 @@
 #endif
 
 /* Bumped whenever a struct, a buffer layout or a function signature changes (checked by the loader). */
-#define FPR_KERNEL_ABI 1
+#define FPR_KERNEL_ABI 2
 #define FPR_MAX_N 16
 #define FPR_MAX_N9 (6 + FPR_MAX_N)
 /* math.pi (M_PI is not C99) */
@@ -82,6 +82,10 @@ typedef struct {
     double board_normal[3], board_point[3];
     double board_stiffness, board_damping, board_friction;
     double end_effector[3];           /* in Fp [m] */
+    int joint_stops_enabled;          /* legs' mechanical stops (JointStopConfig) */
+    double joint_stop_lower, joint_stop_upper;  /* [rad] */
+    double joint_stop_stiffness;      /* [N m/rad] */
+    double joint_stop_damping;        /* [N m s/rad] */
     FprQuadModel quad;
 } FprPlantModel;
 
@@ -424,6 +428,17 @@ static double board_force(const FprPlantModel *m, const double *point, const dou
 
 /* ------------------------------------------------------------------------------------------- plant */
 
+/* plant.joint_stop_moment: unilateral penalty moment of a leg's mechanical stop [N m], positive towards larger
+   θ (the θ_i row of the generalized forces of (2.86)). */
+static double joint_stop_moment(const FprPlantModel *m, double theta, double rate)
+{
+    if (theta < m->joint_stop_lower)
+        return py_max(0.0, m->joint_stop_stiffness * (m->joint_stop_lower - theta) - m->joint_stop_damping * rate);
+    if (theta > m->joint_stop_upper)
+        return py_min(0.0, m->joint_stop_stiffness * (m->joint_stop_upper - theta) - m->joint_stop_damping * rate);
+    return 0.0;
+}
+
 /* Per-step inputs of the structure derivative, held over the RK4 stages. */
 typedef struct {
     const double *thrust;   /* (n, 3) world thrust vectors [N] */
@@ -527,6 +542,8 @@ static int plant_derivative(const FprPlantModel *m, const double *basis, const d
             mm2 += h0 * mid1 - h1 * mid0;
         }
         q_force[6 + i] = length * (k0 * (e1 * l2 - e2 * l1) + k1 * (e2 * l0 - e0 * l2) + k2 * (e0 * l1 - e1 * l0));
+        if (m->joint_stops_enabled && !(m->joint_stop_lower <= theta && theta <= m->joint_stop_upper))
+            q_force[6 + i] += joint_stop_moment(m, theta, xi[6 + i]); /* the leg is in a mechanical stop */
     }
     if (ground) {
         const double vc0 = r[0] * u0 + r[1] * u1 + r[2] * u2;
