@@ -172,14 +172,33 @@ def bench_lockstep(kernel: str, seconds: float = 3.0) -> None:
     sim.close()
 
 
+def _scripted_bridge(port: int, uav_id: int, quat_ned: list[float], thrust: float, stop) -> None:
+    """A scripted stand-in for one px4_bridge (own process, as on the robot): listens on 127.0.0.1:port like
+    px4_bridge and answers each new 20 ms instant of PX4's telemetry with one setpoint stamped with it."""
+    from pymavlink import mavutil
+
+    link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=uav_id, source_component=191)
+    last_ms = -1
+    while not stop.is_set():
+        msg = link.recv_match(type="ATTITUDE_QUATERNION", blocking=True, timeout=0.2)
+        if msg is None or msg.time_boot_ms // 20 == last_ms // 20:
+            continue
+        last_ms = msg.time_boot_ms
+        link.mav.set_attitude_target_send(time_boot_ms=msg.time_boot_ms, target_system=uav_id, target_component=1,
+                                          type_mask=7, q=quat_ned, body_roll_rate=0.0, body_pitch_rate=0.0,
+                                          body_yaw_rate=0.0, thrust=thrust)
+    link.close()
+
+
 def bench_node(cameras: str, seconds: float = 5.0) -> None:
     """The `simulator` NODE (rclpy: /clock at 250 Hz, /fpr/ground_truth, cameras) in lockstep with 3 scripted
-    MAVLink clients standing in for the bridges (listening on 14540+i like px4_bridge, one setpoint per 20 ms of
-    simulated time, stamped with that instant). Run under scripts/isolated.sh (rclpy + loopback UDP)."""
+    MAVLink peers standing in for the bridges, each in its own process (listening on 15540+i, one setpoint per
+    20 ms of simulated time, stamped with that instant). Run under scripts/isolated.sh (rclpy + loopback UDP)."""
+    import multiprocessing
+
     import rclpy
     from fpr_model.frames import quat_enu_flu_to_ned_frd
     from fpr_sim.simulator import SimulatorNode
-    from pymavlink import mavutil
     from rclpy.parameter import Parameter
 
     scenario_file = os.path.join(os.path.dirname(__file__), "..", "src", "fpr_sim", "config", "scenarios",
@@ -190,38 +209,23 @@ def bench_node(cameras: str, seconds: float = 5.0) -> None:
         Parameter("emulated_cameras", value=cameras == "emulated"), Parameter("duration", value=seconds),
         Parameter("remote_base_port", value=15540)])
     sim = node.sim
-    targets = [(e.quat_local.copy(), e.thrust) for e in sim.emulators]
-    stop = threading.Event()
-
-    def client(i: int) -> None:
-        link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{15540 + i}", source_system=1, source_component=191)
-        q = [float(v) for v in quat_enu_flu_to_ned_frd(targets[i][0])]
-        last_ms = -1
-        while not stop.is_set():
-            msg = link.recv_match(type="ATTITUDE_QUATERNION", blocking=True, timeout=0.2)
-            if msg is None or msg.time_boot_ms // 20 == last_ms // 20:
-                continue
-            last_ms = msg.time_boot_ms
-            link.mav.set_attitude_target_send(time_boot_ms=msg.time_boot_ms, target_system=i + 1,
-                                              target_component=1, type_mask=7, q=q, body_roll_rate=0.0,
-                                              body_pitch_rate=0.0, body_yaw_rate=0.0, thrust=targets[i][1])
-        link.close()
-
-    threads = [threading.Thread(target=client, args=(i,), daemon=True) for i in range(sim.n)]
-    for thread in threads:
-        thread.start()
+    stop = multiprocessing.Event()
+    peers = [multiprocessing.Process(target=_scripted_bridge, daemon=True, args=(
+        15540 + i, i + 1, [float(v) for v in quat_enu_flu_to_ned_frd(e.quat_local)], float(e.thrust), stop))
+        for i, e in enumerate(sim.emulators)]
+    for peer in peers:
+        peer.start()
     start = time.perf_counter()
     node.run()
     wall = time.perf_counter() - start
     stop.set()
-    for thread in threads:
-        thread.join()
-    print(f"simulator node [{sim.plant.kernel}], cameras {cameras}, lockstep, 3 scripted MAVLink clients: real-time "
-          f"factor {sim.time / wall:.2f}x ({sim.time:.1f} s simulated in {wall:.1f} s), lockstep timeouts "
-          f"{sim.lockstep_timeouts}")
+    for peer in peers:
+        peer.join(timeout=5.0)
+    print(f"simulator node [{sim.plant.kernel}], cameras {cameras}, lockstep, 3 scripted MAVLink peer processes: "
+          f"real-time factor {sim.time / wall:.2f}x ({sim.time:.1f} s simulated in {wall:.1f} s), lockstep "
+          f"timeouts {sim.lockstep_timeouts}")
     node.destroy_node()
     rclpy.try_shutdown()
-
 
 if __name__ == "__main__":
     bench_physics()
