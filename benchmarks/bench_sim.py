@@ -172,12 +172,13 @@ def bench_lockstep(kernel: str, seconds: float = 3.0) -> None:
     sim.close()
 
 
-def _scripted_bridge(port: int, uav_id: int, quat_ned: list[float], thrust: float, stop) -> None:
+def _scripted_bridge(port: int, uav_id: int, quat_ned: list[float], thrust: float, stop, ready) -> None:
     """A scripted stand-in for one px4_bridge (own process, as on the robot): listens on 127.0.0.1:port like
     px4_bridge and answers each new 20 ms instant of PX4's telemetry with one setpoint stamped with it."""
     from pymavlink import mavutil
 
     link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=uav_id, source_component=191)
+    ready.release()
     last_ms = -1
     while not stop.is_set():
         msg = link.recv_match(type="ATTITUDE_QUATERNION", blocking=True, timeout=0.2)
@@ -209,12 +210,14 @@ def bench_node(cameras: str, seconds: float = 5.0) -> None:
         Parameter("emulated_cameras", value=cameras == "emulated"), Parameter("duration", value=seconds),
         Parameter("remote_base_port", value=15540)])
     sim = node.sim
-    stop = multiprocessing.Event()
+    stop, ready = multiprocessing.Event(), multiprocessing.Semaphore(0)
     peers = [multiprocessing.Process(target=_scripted_bridge, daemon=True, args=(
-        15540 + i, i + 1, [float(v) for v in quat_enu_flu_to_ned_frd(e.quat_local)], float(e.thrust), stop))
+        15540 + i, i + 1, [float(v) for v in quat_enu_flu_to_ned_frd(e.quat_local)], float(e.thrust), stop, ready))
         for i, e in enumerate(sim.emulators)]
     for peer in peers:
         peer.start()
+    for _ in peers:  # the peers listen before the clock starts (as running bridges would)
+        ready.acquire(timeout=30.0)
     start = time.perf_counter()
     node.run()
     wall = time.perf_counter() - start
