@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fpr_model._math import skew_batch
 from fpr_model._validation import as_angles, as_array, as_scalar, as_trailing
 
 __all__ = [
@@ -68,18 +69,7 @@ def skew(v) -> np.ndarray:
     ``v``: (3,) or (..., 3). Returns (3, 3) or (..., 3, 3).
     """
     v = as_trailing("v", v, (3,))
-    return _skew(v)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1] = -v[..., 2]
-    out[..., 0, 2] = v[..., 1]
-    out[..., 1, 0] = v[..., 2]
-    out[..., 1, 2] = -v[..., 0]
-    out[..., 2, 0] = -v[..., 1]
-    out[..., 2, 1] = v[..., 0]
-    return out
+    return skew_batch(v)
 
 
 def _elementary(angle, axis: int, name: str) -> np.ndarray:
