@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from fpr_model.dynamics import thrusts_from_wrench
-from fpr_model.geometry import leg_anchor_angles, platform_to_leg_rotation
+from fpr_model.geometry import desired_uav_rotation, leg_anchor_angles, platform_to_leg_rotation
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_rotmat, rotmat_to_euler_zyx
 
@@ -59,7 +59,6 @@ from fpr_control.reference import (
     decentralized_reference,
 )
 from fpr_control.setpoints import (
-    desired_attitude,
     hover_thrust_share,
     local_frame_attitude,
     saturate_thrust_vector,
@@ -350,7 +349,7 @@ class Controller:
         leg_rotation = platform_to_leg_rotation(alpha, q[7 + own])
         leg_direction = rotation @ leg_rotation[:, 0]
         radial = rotation @ np.array([math.cos(alpha), math.sin(alpha), 0.0])
-        attitude_frame = desired_attitude(mine.vector, leg_direction, self.params.joint_offset_angle, radial)
+        attitude_frame = desired_uav_rotation(mine.vector, leg_direction, self.params.joint_offset_angle, radial)
         attitude = local_frame_attitude(attitude_frame, uav_yaw_frame, uav_yaw_local)
         thrust = float(np.linalg.norm(mine.vector))
         self._last_own_thrust = thrust

@@ -3,7 +3,8 @@
 The controller computes thrust vectors f_i [N] in its world frame F (F0 centralized, F_Fp decentralized).
 For its own UAV it turns f_i into a thrust magnitude and a desired attitude R^d_i (body FLU -> F), with the
 body x axis at the constant angle β from the leg (propeller/leg clearance, (3.37), spec §1.7), then
-re-expresses the yaw in the UAV's own local frame F0i (4.38). Saturations: thrust ≤ f_max, tilt of z^d_i
+re-expresses the yaw in the UAV's own local frame F0i (4.38). The attitude rule itself is
+:func:`fpr_model.geometry.desired_uav_rotation` (shared with the simulator). Saturations: thrust ≤ f_max, tilt of z^d_i
 from the vertical ≤ max_tilt. No rclpy here.
 """
 
@@ -15,12 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from fpr_model.rotations import (
     euler_zyx_to_quat,
-    quat_from_axis_angle,
-    quat_to_rotmat,
     rotmat_to_euler_zyx,
 )
-
-_UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -50,30 +47,6 @@ def saturate_thrust_vector(thrust_vector: np.ndarray, max_thrust: float, max_til
     thrust_saturated = magnitude > max_thrust
     magnitude = min(magnitude, max_thrust)
     return SaturatedThrust(direction * magnitude, thrust_saturated, tilt_saturated)
-
-
-def desired_attitude(thrust_vector: np.ndarray, leg_direction: np.ndarray, beta: float,
-                     fallback_radial: np.ndarray | None = None) -> np.ndarray:
-    """R^d_i = [x^d, z^d × x^d, z^d] (3.38) with z^d = f_i/‖f_i‖ (3.36) and (3.37):
-    ``x' = l_i × z^d`` (normalised), ``x^d = AxisAngle(z^d, β − π/2) x'``; l_i = unit A_i -> B_i in F.
-    This puts x^d at the signed angle +β about z^d from the horizontal projection of −l_i (spec §1.7).
-
-    If l_i ∥ z^d the rule is undefined; then ``fallback_radial`` (the outward leg anchor direction, or x of F)
-    replaces l_i. A zero thrust vector gives z^d = +z."""
-    f = np.asarray(thrust_vector, dtype=float)
-    norm = float(np.linalg.norm(f))
-    z_axis = f / norm if norm > 1e-9 else _UP.copy()
-    x_prime = np.cross(leg_direction, z_axis)
-    if np.linalg.norm(x_prime) < 1e-6:
-        radial = fallback_radial if fallback_radial is not None else np.array([1.0, 0.0, 0.0])
-        x_prime = np.cross(radial, z_axis)
-        if np.linalg.norm(x_prime) < 1e-6:
-            x_prime = np.cross(np.array([0.0, 1.0, 0.0]), z_axis)
-    x_prime /= np.linalg.norm(x_prime)
-    x_axis = quat_to_rotmat(quat_from_axis_angle(z_axis, beta - 0.5 * math.pi)) @ x_prime
-    x_axis -= z_axis * float(x_axis @ z_axis)  # remove round-off
-    x_axis /= np.linalg.norm(x_axis)
-    return np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])
 
 
 def local_frame_attitude(rotation_in_frame: np.ndarray, uav_yaw_in_frame: float, uav_yaw_local: float) -> np.ndarray:

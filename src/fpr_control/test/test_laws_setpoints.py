@@ -18,9 +18,9 @@ from fpr_control.laws import (
     wrench_tracking_error,
 )
 from fpr_control.reference import CentralizedReference, TeleopReference, decentralized_reference
-from fpr_control.setpoints import desired_attitude, local_frame_attitude, saturate_thrust_vector
+from fpr_control.setpoints import local_frame_attitude, saturate_thrust_vector
 from fpr_model.dynamics import forward_dynamics, thrusts_from_wrench
-from fpr_model.geometry import make_configuration
+from fpr_model.geometry import desired_uav_rotation, make_configuration
 from fpr_model.kinematics import jacobian
 from fpr_model.parameters import default_parameters
 from fpr_model.rotations import (
@@ -107,7 +107,7 @@ def test_setpoint_attitude_rule(tilt):
     beta = PARAMS.joint_offset_angle
     f = 12.0 * np.array([math.sin(tilt) * math.cos(0.4), math.sin(tilt) * math.sin(0.4), math.cos(tilt)])
     leg = np.array([math.cos(0.7), math.sin(0.7), -1.0]) / math.sqrt(2.0)
-    R = desired_attitude(f, leg, beta)
+    R = desired_uav_rotation(f, leg, beta)
     assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and np.linalg.det(R) == pytest.approx(1.0, abs=1e-12)
     z = f / np.linalg.norm(f)
     assert np.allclose(R[:, 2], z, atol=1e-12)

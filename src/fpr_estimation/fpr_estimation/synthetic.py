@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from fpr_model.calibration import make_transform
-from fpr_model.geometry import inverse_geometric_model, make_configuration
+from fpr_model.geometry import desired_uav_rotation, inverse_geometric_model, make_configuration
 from fpr_model.parameters import FprParameters
-from fpr_model.rotations import euler_zyx_to_quat, quat_from_axis_angle, quat_to_rotmat
+from fpr_model.rotations import euler_zyx_to_quat, quat_to_rotmat
 
 __all__ = ["SimulatedSequence", "hover_tilt", "simulate_sequence", "uav_pose_in_platform", "uav_world_rotation"]
 
@@ -35,11 +35,7 @@ def hover_tilt(params: FprParameters, leg_angle: float) -> float:
 
 def uav_world_rotation(leg_direction: np.ndarray, thrust_direction: np.ndarray, beta: float) -> np.ndarray:
     """``R_i^d = [x, z × x, z]`` (3.38) with ``z = thrust_direction``, ``x = AxisAngle(z, β − π/2)(l × z)`` (3.37)."""
-    z = thrust_direction / np.linalg.norm(thrust_direction)
-    x_aux = np.cross(leg_direction, z)
-    x_aux /= np.linalg.norm(x_aux)
-    x = quat_to_rotmat(quat_from_axis_angle(z, beta - 0.5 * np.pi)) @ x_aux
-    return np.column_stack([x, np.cross(z, x), z])
+    return desired_uav_rotation(thrust_direction, leg_direction, beta)
 
 
 def uav_pose_in_platform(params: FprParameters, leg_angles, platform_roll: float = 0.0,

@@ -17,11 +17,12 @@ import numpy as np
 from fpr_model._math import cross, skew_batch
 from fpr_model._validation import as_array, as_scalar, as_vector
 from fpr_model.parameters import FprParameters, leg_mass_properties
-from fpr_model.rotations import _quat_to_rotmat
+from fpr_model.rotations import _quat_integrate_rotvec, _quat_to_rotmat, quat_from_axis_angle
 
 __all__ = [
     "Configuration",
     "Velocity",
+    "desired_uav_rotation",
     "difference_configuration",
     "integrate_configuration",
     "inverse_geometric_model",
@@ -243,23 +244,8 @@ def integrate_configuration(q, nu, dt) -> np.ndarray:
     out = q.copy()
     out[:3] += nu[:3] * dt
     out[7:] += nu[6:] * dt
-    out[3:7] = _quat_exp_step(q[3:7], nu[3:6] * dt)
+    out[3:7] = _quat_integrate_rotvec(q[3:7], nu[3:6] * dt)
     return out
-
-
-def _quat_exp_step(quat: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
-    angle = np.sqrt(rotvec @ rotvec)
-    half = 0.5 * angle
-    factor = 0.5 * np.sinc(angle / (2.0 * np.pi))
-    dw, dx, dy, dz = np.cos(half), factor * rotvec[0], factor * rotvec[1], factor * rotvec[2]
-    w, x, y, z = quat
-    out = np.array([
-        w * dw - x * dx - y * dy - z * dz,
-        w * dx + x * dw + y * dz - z * dy,
-        w * dy - x * dz + y * dw + z * dx,
-        w * dz + x * dy - y * dx + z * dw,
-    ])
-    return out / np.sqrt(out @ out)
 
 
 def difference_configuration(q0, q1) -> np.ndarray:
@@ -320,3 +306,28 @@ def leg_angles_from_positions(params: FprParameters, platform_position, platform
         return np.arctan2(-leg_vectors[:, 2], along)
     across = np.linalg.norm(cross(radial, leg_vectors), axis=1)
     return np.arctan2(across, along)
+
+
+def desired_uav_rotation(thrust_vector: np.ndarray, leg_direction: np.ndarray, beta: float,
+                         fallback_radial: np.ndarray | None = None) -> np.ndarray:
+    """Desired quadrotor attitude (body FLU -> the frame F of the vectors, e.g. F0 or F_Fp):
+    R^d_i = [x^d, z^d × x^d, z^d] (3.38) with z^d = f_i/‖f_i‖ (3.36) and (3.37) (erratum E12: columns):
+    ``x' = l_i × z^d`` (normalised), ``x^d = AxisAngle(z^d, β − π/2) x'``; l_i = unit A_i -> B_i in F.
+    This puts x^d at the signed angle +β about z^d from the horizontal projection of −l_i (spec §1.7).
+
+    If l_i ∥ z^d the rule is undefined; then ``fallback_radial`` (the outward leg anchor direction, or x of F)
+    replaces l_i. A zero thrust vector gives z^d = +z."""
+    f = np.asarray(thrust_vector, dtype=float)
+    norm = float(np.linalg.norm(f))
+    z_axis = f / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
+    x_prime = np.cross(leg_direction, z_axis)
+    if np.linalg.norm(x_prime) < 1e-6:
+        radial = fallback_radial if fallback_radial is not None else np.array([1.0, 0.0, 0.0])
+        x_prime = np.cross(radial, z_axis)
+        if np.linalg.norm(x_prime) < 1e-6:
+            x_prime = np.cross(np.array([0.0, 1.0, 0.0]), z_axis)
+    x_prime /= np.linalg.norm(x_prime)
+    x_axis = _quat_to_rotmat(quat_from_axis_angle(z_axis, beta - 0.5 * np.pi)) @ x_prime
+    x_axis -= z_axis * float(x_axis @ z_axis)  # remove round-off
+    x_axis /= np.linalg.norm(x_axis)
+    return np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])

@@ -244,10 +244,19 @@ def quat_to_axis_angle(q) -> tuple[np.ndarray, float]:
 
 def quat_from_rotvec(rv) -> np.ndarray:
     """Quaternion ``exp(rv/2)`` of the rotation vector ``rv`` (axis · angle, rad). Exact, smooth at 0."""
-    rv = as_trailing("rv", rv, (3,))
+    return _quat_from_rotvec(as_trailing("rv", rv, (3,)))
+
+
+def _quat_from_rotvec(rv: np.ndarray) -> np.ndarray:
     angle = np.linalg.norm(rv, axis=-1, keepdims=True)
     # sin(angle/2)/angle = 0.5 * sinc(angle / (2π)) with numpy's normalised sinc.
     return np.concatenate([np.cos(0.5 * angle), 0.5 * np.sinc(angle / (2.0 * np.pi)) * rv], axis=-1)
+
+
+def _quat_integrate_rotvec(q: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
+    """``q ∘ exp(rotvec/2)``, renormalised (unchecked inputs; see :func:`quat_integrate`)."""
+    out = _quat_multiply(q, _quat_from_rotvec(rotvec))
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
 def quat_to_rotvec(q) -> np.ndarray:
@@ -407,8 +416,7 @@ def quat_integrate(q, body_rate, dt) -> np.ndarray:
     q = as_trailing("q", q, (4,))
     body_rate = as_trailing("body_rate", body_rate, (3,))
     dt = as_scalar("dt", dt)
-    out = _quat_multiply(q, quat_from_rotvec(body_rate * dt))
-    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+    return _quat_integrate_rotvec(q, body_rate * dt)
 
 
 def quat_error(q, q_des) -> np.ndarray:

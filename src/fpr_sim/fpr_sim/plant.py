@@ -38,7 +38,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from fpr_model._math import cross
+from fpr_model.geometry import desired_uav_rotation
 from fpr_model.parameters import FprParameters, default_parameters, parameters_from_dict
+from fpr_model.rotations import _quat_to_rotmat, rotmat_to_quat
 
 from fpr_sim._kernels import PlantKernel, resolve_kernel
 from fpr_sim.environment import Environment
@@ -67,15 +70,6 @@ def joint_stop_moment(theta: float, rate: float, lower: float, upper: float, sti
     if theta > upper:
         return min(0.0, stiffness * (upper - theta) - damping * rate)
     return 0.0
-
-
-def _rotmat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([
-        [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z],
-    ])
 
 
 @dataclass
@@ -178,7 +172,7 @@ class Plant:
         n = self.n
         quat = np.asarray(state.quat, dtype=float)
         quat = quat / np.linalg.norm(quat)
-        R = _rotmat(quat)
+        R = _quat_to_rotmat(quat)
         x = np.zeros(13 + 2 * n)
         x[0:3] = state.position
         x[3:7] = quat
@@ -197,7 +191,7 @@ class Plant:
         """Current structure state (q, ν) (copies)."""
         n = self.n
         x = self._x
-        R = _rotmat(x[3:7])
+        R = _quat_to_rotmat(x[3:7])
         return StructureState(x[0:3].copy(), x[3:7].copy(), x[7:7 + n].copy(), R @ x[7 + n:10 + n],
                               x[10 + n:13 + n].copy(), x[13 + n:].copy())
 
@@ -232,23 +226,14 @@ class Plant:
 
     def default_uav_attitudes(self, thrust_vectors: np.ndarray | None = None) -> np.ndarray:
         """Attitudes (n, 4) with z_b along the thrust vectors (default: up) and the yaw rule (3.37) (β)."""
-        from fpr_model.rotations import rotmat_to_quat
 
         n = self.n
         if thrust_vectors is None:
             thrust_vectors = np.tile([0.0, 0.0, 1.0], (n, 1))
         _, tips_body, e = self._tip_geometry(self._x)
-        R = _rotmat(self._x[3:7])
-        out = np.zeros((n, 4))
-        for i in range(n):
-            z = thrust_vectors[i] / np.linalg.norm(thrust_vectors[i])
-            leg = R @ e[i]
-            x_aux = _cross3(leg, z)
-            x_aux /= np.linalg.norm(x_aux)
-            angle = self.params.joint_offset_angle - 0.5 * np.pi  # (3.37): rotate l × z by β − π/2 about z
-            x = np.cos(angle) * x_aux + np.sin(angle) * _cross3(z, x_aux)
-            out[i] = rotmat_to_quat(np.column_stack([x, _cross3(z, x), z]))
-        return out
+        R = _quat_to_rotmat(self._x[3:7])
+        beta = self.params.joint_offset_angle
+        return np.array([rotmat_to_quat(desired_uav_rotation(thrust_vectors[i], R @ e[i], beta)) for i in range(n)])
 
     # ---------------------------------------------------------------------------------------------- kinematics
     def _tip_geometry(self, x):
@@ -598,7 +583,7 @@ class Plant:
         """The true state now (see :class:`GroundTruth`)."""
         state = self.state
         tip_pos, tip_vel = self._tip_kinematics(self._x)
-        Rb = _batch_rotmat(self.fleet.quat)
+        Rb = _quat_to_rotmat(self.fleet.quat)
         specific = np.einsum("nji,nj->ni", Rb, self._tip_acceleration - self.params.gravity_vector)
         external = self.external_wrench()
         return GroundTruth(
@@ -618,7 +603,7 @@ class Plant:
         """
         n = self.n
         x = self._x
-        R = _rotmat(x[3:7])
+        R = _quat_to_rotmat(x[3:7])
         c = np.cos(x[7:7 + n])
         s = np.sin(x[7:7 + n])
         tip_pos, tip_vel = self._tip_kinematics(x)
@@ -644,7 +629,7 @@ class Plant:
         if self.environment.board.enabled:
             pb = self.environment.board_end_effector
             f_board, _ = self.environment.board_force(
-                x[0:3] + R @ pb, R @ (x[7 + n:10 + n] + _cross3(x[10 + n:13 + n], pb)))
+                x[0:3] + R @ pb, R @ (x[7 + n:10 + n] + cross(x[10 + n:13 + n], pb)))
             points.append(pb)
             forces.append(f_board)
         pf = PointForces(np.array(points), np.array(forces) @ R, tip @ R, mids, moment, np.zeros(n))
@@ -661,18 +646,3 @@ class Plant:
         if self._joint_stops is None:
             return np.zeros(n)
         return np.array([joint_stop_moment(x[7 + i], x[13 + n + i], *self._joint_stops) for i in range(n)])
-
-
-def _cross3(a, b) -> np.ndarray:
-    """a × b for (3,) or (k, 3) arrays (broadcasting), cheaper than np.cross for small arrays."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def _batch_rotmat(quats: np.ndarray) -> np.ndarray:
-    from fpr_model.rotations import quat_to_rotmat
-
-    return quat_to_rotmat(quats)

@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from fpr_model._math import cross
 from fpr_model.geometry import model_constants
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_rotmat
@@ -40,17 +41,6 @@ __all__ = ["PointForces", "StructureDynamics", "StructureState"]
 _FIT_REFERENCE_ANGLE = 0.7
 #: Sample leg angles of the fit [rad] (9 samples for 5 unknowns per entry: the residual checks the model).
 _FIT_SAMPLES = np.linspace(0.15, 1.5, 9)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (k, 3) arrays (cheaper than np.cross for a few rows)."""
-    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    out = np.empty(a.shape)
-    out[:, 0] = a1 * b2 - a2 * b1
-    out[:, 1] = a2 * b0 - a0 * b2
-    out[:, 2] = a0 * b1 - a1 * b0
-    return out
 
 
 @dataclass
@@ -182,16 +172,16 @@ class StructureDynamics:
         has_mid = forces.leg_mid_forces.any()
         leg_forces = forces.tip_forces + forces.leg_mid_forces if has_mid else forces.tip_forces
         q[:3] = leg_forces.sum(axis=0)
-        moments = _cross(tips, forces.tip_forces)
+        moments = cross(tips, forces.tip_forces)
         if has_mid:
-            moments += _cross(self.anchors + 0.5 * self.leg_length * e, forces.leg_mid_forces)
+            moments += cross(self.anchors + 0.5 * self.leg_length * e, forces.leg_mid_forces)
         q[3:6] = moments.sum(axis=0) + forces.platform_moment
         if len(forces.platform_points):
             q[:3] += forces.platform_forces.sum(axis=0)
-            q[3:6] += _cross(forces.platform_points, forces.platform_forces).sum(axis=0)
+            q[3:6] += cross(forces.platform_points, forces.platform_forces).sum(axis=0)
         # about the joint axis k_i at A_i: k_i · ((ρ − a_i) × f) = k_i · (l e_i × f_tip + l/2 e_i × f_mid)
         lever_forces = forces.tip_forces + 0.5 * forces.leg_mid_forces if has_mid else forces.tip_forces
-        joint = _cross(e, self.leg_length * lever_forces)
+        joint = cross(e, self.leg_length * lever_forces)
         q[6:] = np.einsum("ij,ij->i", joint, self.joint_axes) + forces.joint_moments
         return q
 
