@@ -204,7 +204,7 @@ def _parse_configuration(params: FprParameters, q, name: str = "q") -> ParsedCon
         [w * w + x * x - y * y - z * z, 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
         [2.0 * (x * y + w * z), w * w - x * x + y * y - z * z, 2.0 * (y * z - w * x)],
         [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), w * w - x * x - y * y + z * z],
-    ])  # (A.60)
+    ])  # (A.60) on plain floats: every model function parses q; rotations._quat_to_rotmat costs ~8 µs more here
     theta = q[7:]
     basis = constants.leg_rotation_basis
     leg_rotations = (np.cos(theta)[:, None, None] * basis[0] + np.sin(theta)[:, None, None] * basis[1]
