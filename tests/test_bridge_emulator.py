@@ -490,9 +490,9 @@ def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
         # time_boot_ms -> ROS time: PX4's boot clock is the simulation clock here, so the offset is ~0 (at most
         # the /clock lag behind the MAVLink telemetry) and the IMU stamps are simulation times
         offset = bridge.bridge.telemetry.mapper.offset
-        assert offset is not None and -CONTROL_PERIOD <= offset <= CLOCK_STEP
+        assert offset is not None and abs(offset) <= CONTROL_PERIOD  # receive-thread / /clock lag, either sign
         imu_stamp = Time.from_msg(imus[-1].header.stamp).nanoseconds * 1e-9
-        assert sim.time - 3 * CONTROL_PERIOD <= imu_stamp <= sim.time + 1e-9
+        assert sim.time - 3 * CONTROL_PERIOD <= imu_stamp <= sim.time + CONTROL_PERIOD
 
         # the stream in simulation time, from its start to OFFBOARD (> 2 s): >= 50 Hz at PX4, and as the bridge
         # reports it (over its last second)
