@@ -88,10 +88,12 @@ def fpr_state() -> FprState:
 
 
 def controller_status() -> ControllerStatus:
-    return ControllerStatus(header=_header(''), uav_id=1, configured_mode=ControllerStatus.MODE_COMMUNICATING,
+    return ControllerStatus(header=_header('world'), uav_id=1, configured_mode=ControllerStatus.MODE_COMMUNICATING,
                             active_mode=ControllerStatus.MODE_NON_COMMUNICATING, fallback_active=True,
                             info_ages=[0.0, 0.02, 0.5], thrust_saturated=False, tilt_saturated=True,
-                            local_state_valid=True, loop_time=0.0004)
+                            local_state_valid=True, loop_time=0.0004,
+                            desired_position=Vector3(x=0.3, y=-0.2, z=1.1), desired_roll=0.05, desired_pitch=-0.03,
+                            desired_yaw=1.2, desired_leg_angles=[0.8, 0.85, 0.9], desired_contact_force=5.0)
 
 
 SAMPLES: dict[str, Callable[[], object]] = {

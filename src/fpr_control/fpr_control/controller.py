@@ -28,7 +28,7 @@ import numpy as np
 from fpr_model.dynamics import thrusts_from_wrench
 from fpr_model.geometry import desired_uav_rotation, leg_anchor_angles, platform_to_leg_rotation
 from fpr_model.parameters import FprParameters
-from fpr_model.rotations import quat_to_rotmat, rotmat_to_euler_zyx
+from fpr_model.rotations import quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
 
 from fpr_control.information import (
     InformationTable,
@@ -166,6 +166,29 @@ class GroundTruth:
             self.leg_angles, self.leg_rates, self.uav_quats))) and float(np.linalg.norm(self.platform_quat)) > 0.5
 
 
+@dataclass(frozen=True)
+class DesiredState:
+    """The desired configuration q^d the law tracked in one control step (fpr_msgs/ControllerStatus desired_*).
+
+    Controller frame: F0 in the ground-truth modes (p^d and ψ^d integrated by :class:`CentralizedReference`),
+    F_Fp in the decentralized ones (p^d = 0: the position is unknown; ψ^d = 0: F_Fp carries the yaw), (4.25).
+    """
+
+    position: np.ndarray  # p^d [m], controller frame
+    roll: float  # ϕ^d [rad], ZYX Euler angles of q^d_p
+    pitch: float  # ϑ^d [rad]
+    yaw: float  # ψ^d [rad]
+    leg_angles: np.ndarray  # θ^d (n,) [rad]
+    contact_force: float  # f^d_c [N] (3.43)
+
+    @staticmethod
+    def from_trajectory(desired: DesiredTrajectory, contact_force: float) -> DesiredState:
+        """Unpack q^d = [p^d (3), q^d_p (4, [w, x, y, z]), θ^d (n)] of a :class:`DesiredTrajectory`."""
+        roll, pitch, yaw = quat_to_euler_zyx(desired.q[3:7])
+        return DesiredState(desired.q[:3].copy(), float(roll), float(pitch), float(yaw), desired.q[7:].copy(),
+                            float(contact_force))
+
+
 @dataclass
 class ControlOutput:
     """One control step's results."""
@@ -185,6 +208,8 @@ class ControlOutput:
     state_ok: bool  # False: no usable state, the setpoint is a hold / hover fallback
     warning: str | None = None
     loop_time: float = 0.0
+    #: q^d tracked in this step; a hold (state_ok False) repeats the last step's, None before the first good step
+    desired: DesiredState | None = None
 
 
 class Controller:
@@ -363,6 +388,7 @@ class Controller:
             contact_force=float(-force_platform[2]), active_mode=active, fallback_active=fallback,
             info_ages=ages, thrust_saturated=mine.thrust_saturated, tilt_saturated=mine.tilt_saturated,
             local_state_valid=local_ok, state_ok=True,
+            desired=DesiredState.from_trajectory(desired, cmd.contact_force),
         )
 
     def _law(self, active: str, terms, error, nu, desired: DesiredTrajectory, tau_hat, flying) -> np.ndarray:
@@ -393,5 +419,5 @@ class Controller:
             attitude=attitude, thrust=float(thrust), thrust_vectors=None, info=info,
             wrench=self.observer.estimate.copy(), contact_force=0.0, active_mode=active, fallback_active=fallback,
             info_ages=ages, thrust_saturated=False, tilt_saturated=False, local_state_valid=local_ok,
-            state_ok=False, warning=warning,
+            state_ok=False, warning=warning, desired=last.desired if last is not None else None,
         )

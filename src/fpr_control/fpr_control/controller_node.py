@@ -221,13 +221,26 @@ class ControllerNode(Node):
         self.wrench_pub.publish(wr)
 
         st = ControllerStatus()
-        st.header.stamp, st.uav_id = stamp, uav_id
+        st.header.stamp, st.header.frame_id, st.uav_id = stamp, wr.header.frame_id, uav_id
         st.configured_mode, st.active_mode = MODE_CODES[self.config.mode], MODE_CODES[out.active_mode]
         st.fallback_active = bool(out.fallback_active)
         st.info_ages = [float(a) for a in out.info_ages]  # inf: never received
         st.thrust_saturated, st.tilt_saturated = bool(out.thrust_saturated), bool(out.tilt_saturated)
         st.local_state_valid = bool(out.local_state_valid)
         st.loop_time = float(out.loop_time)
+        desired = out.desired
+        if desired is None:  # no successful control step yet
+            nan = math.nan
+            st.desired_position.x = st.desired_position.y = st.desired_position.z = nan
+            st.desired_roll = st.desired_pitch = st.desired_yaw = st.desired_contact_force = nan
+            st.desired_leg_angles = [nan] * self.n
+        else:
+            st.desired_position.x, st.desired_position.y, st.desired_position.z = (
+                float(v) for v in desired.position)
+            st.desired_roll, st.desired_pitch, st.desired_yaw = (
+                float(desired.roll), float(desired.pitch), float(desired.yaw))
+            st.desired_leg_angles = [float(v) for v in desired.leg_angles]
+            st.desired_contact_force = float(desired.contact_force)
         self.status_pub.publish(st)
 
 

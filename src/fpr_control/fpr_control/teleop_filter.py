@@ -14,6 +14,14 @@ UAVs' reported θ_i, :mod:`fpr_control.teleop_start`), each with the filter stat
 Without a measured leg angle the leg channel keeps the configured initial value (or the last measured one)
 and the operator's input as before.
 
+External targets (``external`` of :meth:`TeleopFilter.step`): a higher-level law may set the targets of some
+channels in place of the operator's input, e.g. the target-approach law (4.39)
+(:mod:`fpr_control.target_approach`) for the x/y velocity and the yaw rate. They are used only in FLY with a
+live joystick (the operator supervises: a silent joystick still zeroes every velocity), clamped to the channel's
+limits and low-pass filtered like the sticks, so χ̇_d stays consistent; the other channels keep the operator's
+input. When the external targets stop, an ``absolute`` channel returns to the stick value and a ``rate``
+channel integrates the operator's input from the last external target.
+
 The exact gamepad layout of the thesis Fig. 4.5 is lost in the text extraction; the default layout lives in
 ``config/teleop.yaml`` and is documented there. No rclpy in this module.
 """
@@ -21,7 +29,7 @@ The exact gamepad layout of the thesis Fig. 4.5 is lost in the text extraction; 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -124,6 +132,7 @@ class TeleopOutput:
     leg_rates: np.ndarray  # (n,) rad/s
     contact_force: float  # f^d_c [N]
     joy_stale: bool
+    external_channels: tuple[str, ...] = ()  # channels whose target came from ``external`` in this step
 
 
 def apply_dead_zone(value: float, dead_zone: float) -> float:
@@ -225,13 +234,20 @@ class TeleopFilter:
                     low, high = new_low, new_high
         return low, high
 
-    def step(self, t: float, dt: float, measured_leg_angle: float | None = None) -> TeleopOutput:
+    def step(self, t: float, dt: float, measured_leg_angle: float | None = None,
+             external: Mapping[str, float] | None = None) -> TeleopOutput:
         """Advance targets and filters by dt [s] at time t [s] and return χ_d, χ̇_d (4.25)-(4.26).
         ``measured_leg_angle`` [rad]: the robot's current common leg angle (None: unknown), used before FLY
-        when ``start_from_robot`` is set; non-finite values count as unknown."""
+        when ``start_from_robot`` is set; non-finite values count as unknown. ``external``: channel name ->
+        target (channel units) replacing the operator's input for that channel, in FLY with a live joystick
+        only (module doc); non-finite values and unknown names are ignored."""
         previous_mode = self.mode
         self._update_mode()
         stale = self.joy_stale(t)
+        used_external: dict[str, float] = {}
+        if external and self.mode == MODE_FLY and not stale:
+            used_external = {name: float(value) for name, value in external.items()
+                             if name in self._targets and math.isfinite(value)}
         on_ground = self.start_from_robot and self.mode in GROUND_MODES
         if measured_leg_angle is not None and not math.isfinite(measured_leg_angle):
             measured_leg_angle = None
@@ -240,7 +256,9 @@ class TeleopFilter:
         for name in CHANNELS:
             channel = self.config.channels[name]
             u = 0.0 if stale else self._channel_input(channel)
-            if on_ground and name in ATTITUDE_CHANNELS:
+            if name in used_external:
+                target = used_external[name]
+            elif on_ground and name in ATTITUDE_CHANNELS:
                 target = channel.initial  # the robot rests level (configured initial: 0)
             elif follow_legs and name == "leg_angle":
                 target = measured_leg_angle
@@ -283,6 +301,7 @@ class TeleopFilter:
             leg_rates=np.full(n, rates["leg_angle"]),
             contact_force=f["contact_force"],
             joy_stale=stale,
+            external_channels=tuple(name for name in CHANNELS if name in used_external),
         )
 
     def _update_leg_source(self, followed: bool) -> None:

@@ -5,7 +5,15 @@ The mapping (Fig. 4.5 layout, dead zones, low-pass, limits) is config/teleop.yam
 ``initial_legs_from_info`` (default), before FLY the command starts from the robot's configuration: the mean
 of the leg angles the UAVs report on /fpr/info (:mod:`fpr_control.teleop_start`), roll and pitch 0.
 
+With ``target_approach`` (default off), the hybrid scheme of thesis §4.4.2 Scenario II: in FLY, while a fresh,
+valid relative target pose arrives on /fpr/target (geometry_msgs/PoseStamped, frame ``flat_platform``: position =
+target minus platform centre in F_Fp [m], orientation = rotation about z by the relative yaw), the x/y velocity
+and yaw-rate targets come from the law (4.39) (:mod:`fpr_control.target_approach`) instead of the sticks, through
+the same low-pass filter; z velocity, contact force, roll, pitch and legs stay with the operator. Stale or refused
+target -> the sticks again (logged once per change).
+
     ros2 run fpr_control teleop --ros-args -p n:=3
+    ros2 run fpr_control teleop --ros-args -p target_approach:=true
 """
 
 from __future__ import annotations
@@ -14,11 +22,13 @@ import math
 import os
 
 import yaml
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Joy
 
 from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
+from fpr_control.target_approach import TargetApproach, approach_config_from_teleop
 from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
 from fpr_control.teleop_start import ReportedLegAngles, ReportedLegAnglesConfig
 from fpr_msgs.msg import InformationVector, TeleopCommand
@@ -53,6 +63,16 @@ class TeleopNode(Node):
             "[s] an /fpr/info leg angle older than this is not used")).value)
         info_smoothing = float(d("info_smoothing", 1.0, describe(
             "[s] time constant of the average of the reported leg angles (0: none)")).value)
+        target_approach = bool(d("target_approach", False, describe(
+            "hybrid scheme of thesis 4.4.2 Scenario II: in FLY, x/y velocity and yaw rate from the target-approach "
+            "law (4.39) on the relative target pose /fpr/target (z velocity, contact force, roll, pitch, legs "
+            "stay with the operator); false: sticks only, /fpr/target not subscribed")).value)
+        target_lambda_p = float(d("target_lambda_p", 0.4, describe(
+            "[1/s] lambda_p of (4.39): F_Fp x/y velocity = lambda_p * relative target x/y")).value)
+        target_lambda_psi = float(d("target_lambda_psi", 0.25, describe(
+            "[1/s] lambda_psi of (4.39): F_Fp yaw rate = lambda_psi * relative target yaw")).value)
+        target_timeout = float(d("target_timeout", 0.5, describe(
+            "[s] a /fpr/target pose older than this is not used (back to the sticks)")).value)
         path = mapping_file or default_mapping_file()
         with open(path, encoding="utf-8") as stream:
             config = config_from_dict(yaml.safe_load(stream), n=n)
@@ -78,6 +98,11 @@ class TeleopNode(Node):
             self.reported_legs = ReportedLegAngles(ReportedLegAnglesConfig(n, info_timeout, info_smoothing))
             self.create_subscription(InformationVector, "/fpr/info", self._on_info, QoSProfile(
                 depth=20, reliability=ReliabilityPolicy.BEST_EFFORT))  # as the controllers
+        self.target: TargetApproach | None = None
+        if target_approach:
+            self.target = TargetApproach(approach_config_from_teleop(
+                config, target_lambda_p, target_lambda_psi, target_timeout))
+            self.create_subscription(PoseStamped, "/fpr/target", self._on_target, qos_profile_sensor_data)
         self.pub = self.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         self._last_tick: float | None = None
         self._last_mode = self.filter.mode
@@ -85,7 +110,9 @@ class TeleopNode(Node):
         self.create_timer(1.0 / self.rate, self._on_tick)
         self.get_logger().info(f"teleop: mapping {path}, {self.rate:.0f} Hz, n = {n}, "
                                f"feasible leg range {'on' if use_feasibility else 'off'}, initial legs "
-                               f"{'from /fpr/info' if legs_from_info else 'from the mapping'}")
+                               f"{'from /fpr/info' if legs_from_info else 'from the mapping'}, target approach "
+                               + (f"on (lambda_p {target_lambda_p:g} 1/s, lambda_psi {target_lambda_psi:g} 1/s, "
+                                  f"timeout {target_timeout:g} s)" if target_approach else "off"))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -100,14 +127,28 @@ class TeleopNode(Node):
         if reason is not None:
             self.get_logger().warning(f"/fpr/info ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 
+    def _on_target(self, msg: PoseStamped) -> None:
+        p, q = msg.pose.position, msg.pose.orientation
+        reason = self.target.receive(self._now(), (p.x, p.y, p.z), (q.w, q.x, q.y, q.z), msg.header.frame_id)
+        if reason is not None:
+            self.get_logger().warning(f"/fpr/target refused: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+
     def _on_tick(self) -> None:
         now = self._now()
         dt = 1.0 / self.rate if self._last_tick is None else min(max(now - self._last_tick, 0.0), 0.5)
         self._last_tick = now
         measured = self.reported_legs.update(now, dt) if self.reported_legs is not None else None
-        out = self.filter.step(now, dt, measured.leg_angle if measured is not None else None)
+        approach = self.target.command(now) if self.target is not None else None
+        out = self.filter.step(now, dt, measured.leg_angle if measured is not None else None,
+                               approach.as_targets() if approach is not None else None)
         for report in self.filter.take_reports():
             self.get_logger().info(report)
+        if self.target is not None:
+            for level, report in self.target.take_reports():
+                if level == "warning":  # one call site per severity (rclpy rule)
+                    self.get_logger().warning(report)
+                else:
+                    self.get_logger().info(report)
         if out.joy_stale and not self._was_stale:
             self.get_logger().warning("joystick silent: zero velocities, holding roll/pitch/legs/force")
         self._was_stale = out.joy_stale

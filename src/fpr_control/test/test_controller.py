@@ -14,7 +14,7 @@ from closed_loop import Sim, command, hover_state
 from fpr_control.controller import Controller, ControllerConfig, gains_from_dict
 from fpr_control.information import LocalEstimate, PeerInfo
 from fpr_model.parameters import default_parameters
-from fpr_model.rotations import quat_to_euler_zyx
+from fpr_model.rotations import quat_to_euler_zyx, rot_z
 
 PARAMS = default_parameters(3)
 YAW_OFFSETS = np.array([0.0, 1.0, -2.0])  # unknown yaw of each F0i: exercises (4.38)
@@ -178,3 +178,62 @@ def test_bad_inputs_never_give_bad_setpoints(mode):
     outs.append(controller.step(t + 0.08, _local(attitude=np.array([nan, 0, 0, 0])), cmd))
     _check_setpoints(outs)
     assert any(out.thrust_saturated or out.tilt_saturated for out in outs)
+
+
+# ---- the desired configuration q^d reported with each step (ControllerStatus desired_*) ------------------------
+def test_centralized_desired_state_integrates_the_command():
+    """Ground truth in F0: p^d and ψ^d start at the current pose and integrate Rz(ψ^d) Fp v^d and ψ̇^d (forward
+    Euler at the control period); roll, pitch, legs and f^d_c are the command's."""
+    q, nu = hover_state(PARAMS)  # p = (0.2, −0.1, 1.0) m, ψ = 0.3 rad
+    gt = Sim(PARAMS, _controllers("centralized"), q, nu, YAW_OFFSETS).ground_truth()
+    controller = _controllers("centralized")[0]
+    cmd = command(3, roll=0.05, pitch=-0.03, leg=0.8, force=3.0)
+    cmd.platform_velocity = np.array([0.1, 0.05, 0.02])
+    cmd.yaw_rate = 0.2
+    dt, steps, yaw0 = controller.config.period, 25, 0.3
+    expected = q[:3].copy()
+    for k in range(steps):
+        out = controller.step(k * dt, None, cmd, gt)
+        expected = expected + rot_z(yaw0 + k * 0.2 * dt) @ cmd.platform_velocity * dt
+        assert out.state_ok and out.desired is not None
+    d = out.desired
+    assert d.position == pytest.approx(expected, abs=1e-12)
+    assert d.yaw == pytest.approx(yaw0 + steps * 0.2 * dt, abs=1e-12)
+    assert (d.roll, d.pitch, d.contact_force) == pytest.approx((0.05, -0.03, 3.0), abs=1e-12)
+    assert d.leg_angles == pytest.approx([0.8] * 3)
+    # not flying: the reference restarts from the current pose at every step (one period of motion)
+    idle = command(3, mode=0)
+    idle.platform_velocity = np.array([0.1, 0.0, 0.0])
+    out = controller.step(steps * dt, None, idle, gt)
+    assert out.desired.position == pytest.approx(q[:3] + rot_z(yaw0) @ idle.platform_velocity * dt, abs=1e-12)
+    assert out.desired.yaw == pytest.approx(yaw0, abs=1e-12)
+
+
+@pytest.mark.parametrize("mode", ["communicating", "non_communicating", "impedance"])
+def test_decentralized_desired_state_is_the_teleop_configuration(mode):
+    """F_Fp: p^d = 0 (unknown position), ψ^d = 0, roll, pitch, legs and f^d_c = the teleoperation values (4.25)."""
+    q, nu = hover_state(PARAMS)
+    sim = Sim(PARAMS, _controllers(mode), q, nu, YAW_OFFSETS)
+    cmd = command(3, roll=0.05, pitch=-0.04, leg=0.7, force=2.5)
+    cmd.leg_angles = np.array([0.7, 0.72, 0.74])
+    cmd.platform_velocity = np.array([0.1, 0.0, 0.0])
+    outputs = sim.run(0.1, cmd)
+    for out in outputs:
+        d = out.desired
+        assert d.position == pytest.approx(np.zeros(3), abs=0.0) and d.yaw == pytest.approx(0.0, abs=1e-12)
+        assert (d.roll, d.pitch, d.contact_force) == pytest.approx((0.05, -0.04, 2.5), abs=1e-12)
+        assert d.leg_angles == pytest.approx([0.7, 0.72, 0.74], abs=1e-12)
+
+
+def test_desired_state_before_the_first_step_and_during_a_hold():
+    controller = _controllers("communicating")[0]
+    assert controller.step(0.0, None, None).desired is None  # nothing to track yet
+    cmd = command(3, roll=0.05, leg=0.8)
+    good = controller.step(0.02, _local(), cmd)
+    assert good.state_ok and good.desired.roll == pytest.approx(0.05)
+    held = controller.step(0.04, _local(leg_angle=0.0), command(3, roll=0.1))  # singular: the step fails
+    assert not held.state_ok and held.desired is good.desired  # the held setpoint's q^d
+    bad = command(3)
+    bad.roll = float("nan")
+    out = controller.step(0.06, _local(), bad)  # NaN command: refused, hold the configuration at the state
+    assert out.state_ok and out.desired.roll == pytest.approx(0.0)

@@ -16,6 +16,7 @@ from fpr_control.joy_script_node import JoyScriptNode  # noqa: E402
 from fpr_control.joystick_device import JS_EVENT_AXIS, JS_EVENT_BUTTON, pack_event  # noqa: E402
 from fpr_control.joystick_node import JoystickNode  # noqa: E402
 from fpr_control.teleop_node import TeleopNode  # noqa: E402
+from geometry_msgs.msg import Pose  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -24,6 +25,7 @@ from sensor_msgs.msg import Joy  # noqa: E402
 from fpr_msgs.msg import (  # noqa: E402
     AttitudeThrustSetpoint,
     ControllerStatus,
+    FprState,
     InformationVector,
     LocalState,
     TeleopCommand,
@@ -82,10 +84,11 @@ def _info(uav_id, leg=0.8):
     return msg
 
 
-def _teleop(n=3, roll=0.0, nan=False):
+def _teleop(n=3, roll=0.0, nan=False, pitch=0.0, contact_force=0.0):
     msg = TeleopCommand()
     msg.mode = TeleopCommand.MODE_FLY
     msg.roll = float("nan") if nan else roll
+    msg.pitch, msg.contact_force = pitch, contact_force
     msg.leg_angles = [0.8] * n
     msg.leg_rates = [0.0] * n
     return msg
@@ -109,9 +112,13 @@ def test_controller_node_fallback_and_bad_input():
                         and teleop_pub.get_subscription_count() > 0 and len(statuses) > 0)
         state = {"peers": (2, 3), "nan_local": False, "nan_teleop": False, "nan_info": False}
 
+        first = statuses[0]  # before any input: no desired configuration yet
+        assert math.isnan(first.desired_roll) and len(first.desired_leg_angles) == 3
+        assert all(math.isnan(v) for v in first.desired_leg_angles)
+
         def feed():
             local_pub.publish(_local_state(nan=state["nan_local"]))
-            teleop_pub.publish(_teleop(nan=state["nan_teleop"]))
+            teleop_pub.publish(_teleop(roll=0.04, pitch=-0.02, contact_force=2.0, nan=state["nan_teleop"]))
             for j in state["peers"]:
                 info_pub.publish(_info(j, leg=float("nan") if state["nan_info"] else 0.8))
 
@@ -119,6 +126,13 @@ def test_controller_node_fallback_and_bad_input():
         assert wait_for(lambda: any(s.active_mode == ControllerStatus.MODE_COMMUNICATING
                                     and not s.fallback_active for s in statuses[-3:]), timeout=8.0)
         assert any(i.uav_id == 1 and i.valid for i in infos)  # own zeta_1 published
+        # q^d tracked: the teleoperation roll/pitch/legs/force in F_Fp, no position, no yaw (4.25)
+        st = statuses[-1]
+        assert st.header.frame_id == "flat_platform"
+        assert (st.desired_position.x, st.desired_position.y, st.desired_position.z) == (0.0, 0.0, 0.0)
+        assert (st.desired_roll, st.desired_pitch, st.desired_yaw) == pytest.approx((0.04, -0.02, 0.0), abs=1e-12)
+        assert list(st.desired_leg_angles) == pytest.approx([0.8] * 3, abs=1e-12)
+        assert st.desired_contact_force == pytest.approx(2.0)
         assert wrenches and len(wrenches[-1].leg_moments) == 3
         # silence UAV 3: NC within info_timeout + a period (plus delivery jitter) and reported
         state["peers"] = (2,)
@@ -139,6 +153,47 @@ def test_controller_node_fallback_and_bad_input():
             assert np.all(np.isfinite(q)) and abs(np.linalg.norm(q) - 1.0) < 1e-9
             assert math.isfinite(sp.thrust) and 0.0 <= sp.thrust <= 25.0 and sp.uav_id == 1
         assert wait_for(lambda: not statuses[-1].local_state_valid, timeout=2.0)
+        helper.destroy_timer(timer)
+    finally:
+        graph.close()
+
+
+def test_controller_node_reports_the_centralized_desired_state():
+    """Ground truth (F0): desired_position starts at the platform position and integrates the commanded F_Fp
+    velocity (Rz(ψ) Fp v^d, ψ = 0 here); yaw from the ground truth; frame "world"."""
+    graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("uav_id", value=1), Parameter("mode", value="centralized")])
+    try:
+        helper = graph.helper
+        statuses = []
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        truth_pub = helper.create_publisher(FprState, "/fpr/ground_truth", BEST_EFFORT)
+        teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+        assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
+        truth = FprState()
+        truth.header.frame_id = "world"
+        truth.platform_pose.position.x, truth.platform_pose.position.y, truth.platform_pose.position.z = \
+            0.2, -0.1, 1.0
+        truth.platform_pose.orientation.w = 1.0
+        truth.leg_angles, truth.leg_rates = [0.8] * 3, [0.0] * 3
+        truth.uav_poses = [Pose() for _ in range(3)]
+        for pose in truth.uav_poses:
+            pose.orientation.w = 1.0
+        teleop = _teleop(roll=0.03)
+        teleop.platform_velocity.x = 0.2
+
+        def feed():
+            truth_pub.publish(truth)
+            teleop_pub.publish(teleop)
+
+        timer = helper.create_timer(0.02, feed)
+        assert wait_for(lambda: statuses and statuses[-1].desired_position.x > 0.2 + 0.02, timeout=8.0)
+        st = statuses[-1]
+        assert st.header.frame_id == "world" and st.active_mode == ControllerStatus.MODE_CENTRALIZED
+        assert st.desired_position.y == pytest.approx(-0.1, abs=1e-9)
+        assert st.desired_position.z == pytest.approx(1.0, abs=1e-9)
+        assert (st.desired_roll, st.desired_yaw) == pytest.approx((0.03, 0.0), abs=1e-12)
+        assert list(st.desired_leg_angles) == pytest.approx([0.8] * 3)
         helper.destroy_timer(timer)
     finally:
         graph.close()

@@ -1,6 +1,7 @@
 """teleop node in process (real rclpy, run through scripts/run_tests.sh): before FLY the command follows the leg
 angles the UAVs report on /fpr/info (best-effort, as the controllers publish them); FLY hands over to the
-operator from there; without /fpr/info, or with ``initial_legs_from_info`` false, the mapping's initial value."""
+operator from there; without /fpr/info, or with ``initial_legs_from_info`` false, the mapping's initial value.
+With ``target_approach``, x/y velocity and yaw rate follow (4.39) on /fpr/target in FLY."""
 
 from __future__ import annotations
 
@@ -13,9 +14,10 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 from fpr_control.teleop_filter import LEG_SOURCE_CONFIGURED, LEG_SOURCE_INFO  # noqa: E402
 from fpr_control.teleop_node import TeleopNode  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import Joy  # noqa: E402
 
 from fpr_msgs.msg import InformationVector, TeleopCommand  # noqa: E402
@@ -36,7 +38,7 @@ def wait_for(predicate, timeout=5.0, step=0.01):
 class Bench:
     """A teleop node plus a helper publishing Joy (50 Hz) and, optionally, /fpr/info of three UAVs (50 Hz)."""
 
-    def __init__(self, parameters, with_info=True):
+    def __init__(self, parameters, with_info=True, with_target=False):
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = TeleopNode(context=self.context, parameter_overrides=parameters)
@@ -46,6 +48,9 @@ class Bench:
         self.joy_pub = self.helper.create_publisher(Joy, "/joy", 10)
         self.info_pub = self.helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT) if with_info \
             else None
+        self.target_pub = self.helper.create_publisher(PoseStamped, "/fpr/target", qos_profile_sensor_data) \
+            if with_target else None
+        self.target = None  # (x, y, z, yaw, frame_id) published at 50 Hz when set
         self.axes = [0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0]
         self.buttons = [0] * 11
         self.leg_angles = {1: 1.00, 2: 1.03, 3: 1.06}  # θ_i [rad] the UAVs report
@@ -63,6 +68,14 @@ class Bench:
             joy = Joy()
             joy.axes, joy.buttons = [float(a) for a in self.axes], list(self.buttons)
             self.joy_pub.publish(joy)
+            if self.target_pub is not None and self.target is not None:
+                x, y, z, yaw, frame = self.target
+                pose = PoseStamped()
+                pose.header.frame_id = frame
+                pose.header.stamp = self.helper.get_clock().now().to_msg()
+                pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = x, y, z
+                pose.pose.orientation.w, pose.pose.orientation.z = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+                self.target_pub.publish(pose)
             if self.info_pub is None:
                 return
             for uav_id, leg in self.leg_angles.items():
@@ -166,5 +179,75 @@ def test_teleop_node_ignores_vectors_their_senders_mark_invalid():
         with bench.lock:
             bench.valid = True
         assert wait_for(_legs_near(bench, 1.03, tolerance=0.01), timeout=8.0)  # smoothing τ = 1 s
+    finally:
+        bench.close()
+
+
+def _velocity_near(bench, vx, vy, vz, yaw_rate, tolerance=5e-3):
+    def check():
+        c = bench.latest()
+        return (abs(c.platform_velocity.x - vx) < tolerance and abs(c.platform_velocity.y - vy) < tolerance
+                and abs(c.platform_velocity.z - vz) < tolerance and abs(c.yaw_rate - yaw_rate) < tolerance)
+    return check
+
+
+def test_teleop_node_target_approach_hybrid_scheme():
+    """Scenario II: in FLY with a fresh /fpr/target, v_x, v_y and the yaw rate follow (4.39)
+    (λ_p = 0.4, λ_ψ = 0.25 1/s) through the low-pass; v_z, f^d_c, roll, pitch, legs stay the operator's. Stale
+    or refused target: the sticks again."""
+    bench = Bench([Parameter("n", value=3), Parameter("target_approach", value=True),
+                   Parameter("target_timeout", value=0.3)], with_info=False, with_target=True)
+    try:
+        assert wait_for(lambda: bench.joy_pub.get_subscription_count() > 0
+                        and bench.target_pub.get_subscription_count() > 0 and len(bench.commands) > 0)
+        with bench.lock:
+            bench.axes[4] = 1.0  # stick v_x = +0.5 m/s
+            bench.axes[1] = 1.0  # stick v_z = +0.3 m/s
+            bench.axes[2] = 0.0  # trigger half pressed: f^d_c = 5 N
+            bench.target = (-0.5, 1.0, 0.2, -0.8, "flat_platform")
+        assert wait_for(_velocity_near(bench, 0.5, 0.0, 0.3, 0.0))  # not flying: the sticks
+        bench.press(A)
+        bench.press(X)
+        assert wait_for(_velocity_near(bench, -0.2, 0.4, 0.3, -0.2))  # (4.39) + the operator's v_z
+        c = bench.latest()
+        assert c.contact_force == pytest.approx(5.0, abs=0.05) and c.mode == TeleopCommand.MODE_FLY
+        assert c.roll == pytest.approx(0.0) and c.leg_angles == pytest.approx([math.radians(60.0)] * 3)
+        assert all(math.isfinite(v) for v in (c.platform_acceleration.x, c.yaw_acceleration))
+        with bench.lock:
+            bench.target = None  # silent: stale after 0.3 s, back to the sticks
+        assert wait_for(_velocity_near(bench, 0.5, 0.0, 0.3, 0.0))
+        assert not bench.node.target.fresh(bench.node._now())
+        with bench.lock:
+            bench.target = (1.0, 0.0, 0.0, 0.0, "flat_platform")  # back
+        assert wait_for(_velocity_near(bench, 0.4, 0.0, 0.3, 0.0))
+        with bench.lock:
+            bench.target = (float("nan"), 0.0, 0.0, 0.0, "flat_platform")  # refused: the sticks at once
+        assert wait_for(_velocity_near(bench, 0.5, 0.0, 0.3, 0.0))
+        with bench.lock:
+            bench.target = (1.0, 0.0, 0.0, 0.0, "flat_platform")
+        assert wait_for(_velocity_near(bench, 0.4, 0.0, 0.3, 0.0))
+        with bench.lock:
+            bench.target = (250.0, 0.0, 0.0, 0.0, "flat_platform")  # absurd: refused
+        assert wait_for(_velocity_near(bench, 0.5, 0.0, 0.3, 0.0))
+        with bench.lock:
+            bench.target = (1.0, 0.0, 0.0, 0.0, "world")  # wrong frame: refused
+        time.sleep(0.5)
+        assert _velocity_near(bench, 0.5, 0.0, 0.3, 0.0)()
+    finally:
+        bench.close()
+
+
+def test_teleop_node_target_approach_is_off_by_default():
+    bench = Bench([Parameter("n", value=3)], with_info=False, with_target=True)
+    try:
+        assert wait_for(lambda: bench.joy_pub.get_subscription_count() > 0 and len(bench.commands) > 0)
+        assert bench.target_pub.get_subscription_count() == 0 and bench.node.target is None
+        names = {p.name: p for p in bench.node.describe_parameters(
+            ["target_approach", "target_lambda_p", "target_lambda_psi", "target_timeout"])}
+        assert all(p.description for p in names.values())
+        assert bench.node.get_parameter("target_approach").value is False
+        assert bench.node.get_parameter("target_lambda_p").value == pytest.approx(0.4)
+        assert bench.node.get_parameter("target_lambda_psi").value == pytest.approx(0.25)
+        assert bench.node.get_parameter("target_timeout").value == pytest.approx(0.5)
     finally:
         bench.close()
