@@ -6,7 +6,9 @@ Block diagram of one step ``dt`` (default 1 ms):
 2. the quadrotor thrust vectors ``f_i = R_bi [0, 0, f_t,i]`` are held over the step (zero-order hold) and the
    structure (:class:`~fpr_sim.structure.StructureDynamics`, thesis (2.86) with the plant's TRUE parameters) is
    advanced by classical RK4 with the environment forces (ground, board, wind, scheduled wrench) evaluated at
-   every stage; the platform quaternion is re-normalised;
+   every stage; the platform quaternion is re-normalised. The air velocities are evaluated once per step at the
+   step's start (:meth:`Plant._air_velocities`: the uniform wind, plus the fan's jet at the platform centre, each
+   quadrotor and each leg's middle) and held over the stages;
 3. the leg force on each quadrotor ``f_l,i = m_b,i a_i − f_i − m_b,i g − f_env,i`` (a_i from the tip velocity
    change over the step) gives the spherical-joint offset moment (2.93) ``m_l,i = (S_i − B_i) × f_l,i`` with
    ``S_i − B_i = R_bi d [cos β, sin β, 0]`` (the physical lever from the CoM to the joint), plus, for the
@@ -145,7 +147,12 @@ class Plant:
         self._tip_velocity_list = [(0.0, 0.0, 0.0)] * self.n
         self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * self.n
         self._yaw_anchors = [math.nan] * self.n  # landing-gear yaw friction anchors [rad] (NaN: not touching)
+        self._air_list: list[float] | None = None  # air velocities of the step (see _air_velocities), None: still air
         self.reset_to_initial_state()
+        # the wind generator's default reference point: the quadrotors' centroid in the initial state (thesis
+        # Exp. III measured the wind speed there, at hover height)
+        uav_centroid = np.mean(self._tip_kinematics_list(self._x_list)[0], axis=0)
+        self.environment.attach_fan(uav_centroid, self.dt)
         self._compiled = PlantKernel(self) if self.kernel == "compiled" else None
 
     # ---------------------------------------------------------------------------------------------- state
@@ -288,7 +295,7 @@ class Plant:
         xi = x[7 + n:]
         u0, u1, u2, w0, w1, w2 = xi[:6]
         ground = self._ground_active
-        wind = self._wind_list
+        wind = self._air_list  # [platform, quadrotors 1..n, leg middles 1..n] x 3 (world), held over the step
         need_velocity = ground or wind is not None
         # platform force (world, at P) and Q̃ accumulators (Fp)
         fp0, fp1, fp2 = self._platform_force_list
@@ -325,11 +332,14 @@ class Plant:
                     f1 += g1
                     f2 += g2
                 if wind is not None:
-                    air0, air1, air2 = wind
+                    k = 3 + 3 * i
+                    air0, air1, air2 = wind[k], wind[k + 1], wind[k + 2]  # at the quadrotor
                     drag = self._uav_drag
                     f0 += drag * (air0 - v0)
                     f1 += drag * (air1 - v1)
                     f2 += drag * (air2 - v2)
+                    k += 3 * n
+                    air0, air1, air2 = wind[k], wind[k + 1], wind[k + 2]  # at the leg's middle
                     h0, h1, h2 = 0.5 * (t0 + a0), 0.5 * (t1 + a1), 0.5 * (t2 + a2)
                     hl = 0.5 * lr
                     b0 = u0 + w1 * h2 - w2 * h1 + hl * n0
@@ -424,7 +434,7 @@ class Plant:
         payload = env.payload_mass(self.time)
         if payload != self.structure.payload_mass:
             self.structure.set_payload_mass(payload)
-        self._wind_list = env.wind_velocity(self.time).tolist() if env.has_wind else None
+        self._air_list = self._air_velocities() if env.has_wind else None
         if self.scenario.external_wrenches:
             force, moment = env.platform_wrench(self.time)
             self._platform_force_list = force.tolist()
@@ -436,6 +446,28 @@ class Plant:
             self._advance()
         self.time = (self.steps + 1) * self.dt
         self.steps += 1
+
+    def _air_velocities(self) -> list[float]:
+        """Air velocity [m/s] (world) now at the platform centre P, at each quadrotor B_i and at each leg's middle
+        (A_i + B_i)/2, flattened: 3 (1 + 2n) floats [P, B_1..B_n, mid_1..mid_n]. The uniform wind is the same
+        everywhere; the fan's jet is evaluated at these points of the current state (held over the step)."""
+        env = self.environment
+        n = self.n
+        if env.fan is None:
+            return env.wind_velocity(self.time).tolist() * (1 + 2 * n)
+        x = self._x_list
+        if self._tips is None:
+            self._tips = self._tip_kinematics_list(x)
+        tips = self._tips[0]
+        px, py, pz = x[0:3]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(*x[3:7])
+        points = [(px, py, pz)]
+        points += tips
+        for (a0, a1, a2), (b0, b1, b2) in zip(self._anchors, tips, strict=True):
+            points.append((0.5 * (px + r00 * a0 + r01 * a1 + r02 * a2 + b0),
+                           0.5 * (py + r10 * a0 + r11 * a1 + r12 * a2 + b1),
+                           0.5 * (pz + r20 * a0 + r21 * a1 + r22 * a2 + b2)))
+        return env.air_velocities(self.time, points)
 
     def _advance(self) -> None:
         """The physics of one step after the scheduling of :meth:`step` (pure-Python reference)."""
@@ -479,11 +511,12 @@ class Plant:
             for i in range(n):
                 env_uav[i] = list(env.ground.point_force(anchors[i], *feet[i], *tip_vel[i]))
         foot_normals = [f[2] for f in env_uav]  # ground normal force on each quadrotor's gear [N] (before wind)
-        if self._wind_list is not None:
+        if self._air_list is not None:
             drag = self._uav_drag
+            air = self._air_list
             for i in range(n):
                 for k in range(3):
-                    env_uav[i][k] += drag * (self._wind_list[k] - tip_vel[i][k])
+                    env_uav[i][k] += drag * (air[3 + 3 * i + k] - tip_vel[i][k])
         # spherical-joint offset moment (2.93) on each quadrotor, body frame: m = d_b × (R_biᵀ f_l,i),
         # f_l,i = m_b,i a_i − f_i − m_b,i g − f_env,i with a_i the tip acceleration over the step
         gx, gy, gz = self._gravity
@@ -595,8 +628,10 @@ class Plant:
         )
 
     def external_wrench(self) -> np.ndarray:
-        """True τ_e (6+n) of the disturbances now: board, scheduled wrench, wind, ground, payload weight, and the
-        legs' joint-stop moments (the controllers' model has no stops: an observer sees them as disturbances).
+        """True τ_e (6+n) of the disturbances now: board, scheduled wrench, wind (uniform and fan, on the platform,
+        the legs' middles and the quadrotors, with the air velocities of :meth:`_air_velocities` at this time and
+        state), ground, payload weight, and the legs' joint-stop moments (the controllers' model has no stops: an
+        observer sees them as disturbances).
 
         Layout [f_p (F0), m_p (Fp), joint moments] as (2.26); evaluated by the generalized-force map of the
         environment forces alone (thrust and the structure's own gravity excluded).
@@ -622,10 +657,19 @@ class Plant:
             tip = np.zeros((n, 3))
         mids = np.zeros((n, 3))
         if self.environment.has_wind:
-            air = self.environment.wind_velocity(self.time)
-            tip = tip + self.scenario.wind.uav_drag * (air - tip_vel)
-            forces.append(self.scenario.wind.platform_drag * (air - R @ x[7 + n:10 + n]))
+            wind = self.scenario.wind
+            air = np.reshape(self._air_velocities(), (1 + 2 * n, 3))
+            tip = tip + wind.uav_drag * (air[1:1 + n] - tip_vel)
+            forces.append(wind.platform_drag * (air[0] - R @ x[7 + n:10 + n]))
             points.append(np.zeros(3))
+            # the legs' drag at their middles (Fp): v = R (u + ω × (a_i + l e_i / 2) + (l/2) θ̇_i ∂e_i/∂θ_i)
+            sd = self.structure
+            e = np.column_stack([sd.cos_alpha * c, sd.sin_alpha * c, -s])
+            de = np.column_stack([-sd.cos_alpha * s, -sd.sin_alpha * s, -c])
+            half = 0.5 * sd.leg_length
+            mid_velocity = (x[7 + n:10 + n] + cross(x[10 + n:13 + n], sd.anchors + half * e)
+                            + half * x[13 + n:, None] * de)
+            mids = wind.leg_drag * (air[1 + n:] @ R - mid_velocity)
         if self.environment.board.enabled:
             pb = self.environment.board_end_effector
             f_board, _ = self.environment.board_force(

@@ -11,6 +11,10 @@ Example (see ``config/scenarios/*.yaml``)::
     plant: {platform_mass: 0.27}          # true parameters: overrides of thesis Table B.1
     payloads: [{mass: 0.3, attach_time: 10.0, release_time: 20.0}]
     wind: {velocity: [1.0, 0.0, 0.0]}
+    # or a wind generator: 26 km/h mean at the quadrotors' hover centroid, fan 3 m upstream (thesis Exp. III)
+    # wind: {fan: {enabled: true, speed: 7.22, direction: [1.0, 0.0, 0.0]}}
+    board: {enabled: true, point: [0.0, 0.0, 1.85], size: [0.3, 0.3]}   # a 30 x 30 cm board
+    target: {enabled: true, position: [0.05, 0.0, 1.85], yaw: 0.3}       # /fpr/target (thesis §4.4.2)
     joint_stops: {lower: 0.1745, upper: 1.606}   # the legs' mechanical stops [rad] (default on; enabled: false)
 
 Landing: PX4's AUTO.LAND (and the failsafes that end in it) lands each UAV level on its own; the legs then lose
@@ -35,6 +39,7 @@ __all__ = [
     "BoardConfig",
     "CameraConfig",
     "ExternalWrenchEvent",
+    "FanConfig",
     "GroundConfig",
     "Gust",
     "InitialState",
@@ -44,6 +49,7 @@ __all__ = [
     "QuadrotorConfig",
     "Scenario",
     "SensorConfig",
+    "TargetConfig",
     "WindConfig",
     "load_scenario",
     "scenario_from_dict",
@@ -215,14 +221,71 @@ class Gust:
 
 
 @dataclass
+class FanConfig:
+    """A wind generator (thesis Exp. III, l.5245-5251: "a wind generator", about 26 km/h measured at the centroid
+    of the three quadrotors at their hover height, blowing along +x0; Exp. IV Task 3, l.5408-5413: about 13 km/h):
+    a round free jet from an outlet of diameter ``diameter`` at ``position`` blowing along ``direction``, with
+    seeded turbulence. Its air velocity adds to :class:`WindConfig`'s uniform wind and is evaluated each physics
+    step where the robot's parts are (the platform centre, each leg's middle, each quadrotor), so the force
+    changes as the robot moves in or out of the jet (model and constants: :class:`fpr_sim.environment.FanJet`).
+
+    Mean velocity at a point at axial distance x > 0 from the outlet and radial distance r from the axis (none
+    behind the outlet plane, x ≤ 0): along ``direction``, of magnitude
+
+        U(x, r) = U_0 · min(1, B·D / x) · exp(−ln 2 · r² / b(x)²),    b(x) = max(D / 2, S·x)
+
+    (centre-line decay and Gaussian profile of the self-similar round jet; the near field is a potential core of
+    the outlet speed and half-width D/2). ``U_0`` follows from ``speed`` = U at ``reference_point``.
+    Turbulence: ``turbulence_intensity`` · U(x, r) · ξ(t), ξ a unit-variance first-order Gauss-Markov process on
+    each world axis with time constant ``turbulence_time_constant`` (a first-order / Dryden-longitudinal-like
+    spectrum), the same ξ for all of the robot's points, deterministic with the scenario seed.
+    """
+
+    enabled: bool = False
+    #: outlet centre [m] world; None: ``distance`` m upstream of ``reference_point`` on the jet axis
+    #: (``reference_point − distance·direction``: the fan aims at the reference point)
+    position: list[float] | None = None
+    distance: float = 3.0  #: [m] outlet → reference point when ``position`` is None (not given in the thesis)
+    direction: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])  #: jet axis, world (+x0, thesis)
+    #: D, outlet diameter [m]: not in the thesis; 1.5 m (a large drum fan, about the robot's span) makes the
+    #: default drag give the thesis's estimate at 13 km/h (≈ 2 N, −2 N m, Exp. IV Task 3), see WindConfig
+    diameter: float = 1.5
+    #: mean air speed at ``reference_point`` [m/s]; default 26 km/h (thesis Exp. III, l.5246); 13 km/h = 3.61
+    speed: float = 26.0 / 3.6
+    #: where ``speed`` holds [m] world; None: the quadrotors' centroid in the initial state (a hover start: where
+    #: the thesis measured, "the centroid of the three quadrotors at their hovering height")
+    reference_point: list[float] | None = None
+    #: σ_u / U per axis [-]: 0.15 (fan jets: 10-20 % in the near field, up to 25 % far downstream; see FanJet)
+    turbulence_intensity: float = 0.15
+    #: τ of the Gauss-Markov turbulence [s]: integral length (~ the jet half-width, 0.3-0.5 m) / mean speed
+    turbulence_time_constant: float = 0.1
+    decay_constant: float = 5.8  #: B of U_c/U_0 = B·D/x [-] (round jet, Hussein et al. 1994; Pope 2000 Table 5.1)
+    spreading_rate: float = 0.094  #: S = db/dx of the velocity half-width [-] (round jet, same sources)
+
+
+@dataclass
 class WindConfig:
-    """Wind as an air velocity with linear drag on the platform, the legs (at mid-length) and the quadrotors."""
+    """Wind as an air velocity with linear drag ``c (w − v)`` on the platform, the legs (at mid-length) and the
+    quadrotors: a uniform part (``velocity`` + half-sine ``gusts``, the same everywhere) plus, when enabled, the
+    jet of a wind generator (``fan``, :class:`FanConfig`, which varies in space and time).
+
+    Linear drag: for a hovering multirotor the rotors' drag (blade flapping and induced drag, the "H-force") is
+    nearly linear in the relative air speed (Mahony, Kumar & Corke, IEEE RAM 19(3), 2012, "rotor drag"), and it
+    dominates the frame's quadratic drag at these speeds. The defaults are kept as they were: in a UNIFORM
+    3.61 m/s (13 km/h) wind the hovering robot takes 0.86 N s/m · 3.61 m/s = 3.1 N (legs at 45°: τ_e x force
+    3.1 N, pitch moment −2.1 N m); in the default fan jet, which covers the robot only partly (the lateral
+    quadrotors sit off the axis), 13 km/h at the quadrotors' centroid gives 2.1 N / −1.4 N m with the legs at
+    45° and 2.3 N / −2.0 N m at 60°, the thesis's estimate of Exp. IV Task 3 (about 2 N and −2 N m,
+    l.5412-5413); 26 km/h (Exp. III) doubles them. The jet geometry is not in the thesis: the fan diameter
+    (1.5 m, :class:`FanConfig`) rather than the drag was chosen to match, so existing scenarios are unchanged.
+    """
 
     velocity: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  #: constant part [m/s]
     gusts: list[Gust] = field(default_factory=list)
     platform_drag: float = 0.05  #: [N s/m]
     leg_drag: float = 0.02  #: [N s/m] per leg
     uav_drag: float = 0.25  #: [N s/m] per quadrotor
+    fan: FanConfig = field(default_factory=FanConfig)  #: a wind generator's jet (default off)
 
 
 @dataclass
@@ -238,15 +301,44 @@ class ExternalWrenchEvent:
 @dataclass
 class BoardConfig:
     """A stiff board (plane through ``point`` with unit ``normal`` pointing to the free side) the platform's
-    end-effector point ``end_effector`` (in Fp) can push on: penalty normal force, Coulomb friction."""
+    end-effector point ``end_effector`` (in Fp) can push on: penalty normal force, Coulomb friction.
+
+    The board is a rectangle centred on ``point``: ``size[0]`` along ``edge`` (projected onto the board plane)
+    and ``size[1]`` along ``normal × edge``; contact happens only while the end-effector point is over it (its
+    projection onto the plane inside the rectangle; sliding past an edge ends the contact). ``inf`` (default)
+    is an unbounded plane on that side, the former behaviour. The thesis's board is 30 × 30 cm (l.5339, l.7041:
+    ``size: [0.3, 0.3]``). The contact region is the prism behind the rectangle: an end-effector brought beside
+    the board and then behind its plane is pushed back out through the plane.
+    """
 
     enabled: bool = False
-    point: list[float] = field(default_factory=lambda: [0.0, 0.0, 3.0])  #: [m] world
+    point: list[float] = field(default_factory=lambda: [0.0, 0.0, 3.0])  #: [m] world, the board's centre
     normal: list[float] = field(default_factory=lambda: [0.0, 0.0, -1.0])  #: world, towards the robot
+    size: list[float] = field(default_factory=lambda: [math.inf, math.inf])  #: side lengths [m] (inf: unbounded)
+    edge: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])  #: world direction of the side size[0]
     end_effector: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.05])  #: contact point in Fp [m]
     stiffness: float = 5000.0  #: [N/m]
     damping: float = 50.0  #: [N s/m]
     friction: float = 0.3
+
+
+@dataclass
+class TargetConfig:
+    """Emulated relative pose of a target for the approach law (4.39) of thesis §4.4.2 Scenario II (l.7049-7068):
+    when enabled the simulator publishes ``/fpr/target`` (geometry_msgs/PoseStamped, frame ``flat_platform``) at
+    ``rate``: the target position minus the platform centre in the flat platform frame F_Fp (platform yaw only,
+    z up) and the rotation about z by the target's yaw minus the platform's, wrapped to (−π, π]
+    (fpr_sim.target). The thesis emulated it from motion capture with the noise of its emulated MOCAP poses,
+    2 cm per axis and 2° (l.6604-6608): Gaussian, per axis of the position and on the yaw, seeded.
+    """
+
+    enabled: bool = False
+    #: target point [m] world, e.g. the centre of the 10 × 10 cm region on the board (l.7042-7044)
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0, 3.0])
+    yaw: float = 0.0  #: target yaw in F0 [rad]
+    position_noise: float = 0.02  #: 1σ per axis [m] (thesis l.6606-6607)
+    yaw_noise: float = math.radians(2.0)  #: 1σ [rad] (thesis l.6606-6607)
+    rate: float = 50.0  #: publishing rate [Hz] (simulation time)
 
 
 @dataclass
@@ -267,6 +359,7 @@ class Scenario:
     joint_stops: JointStopConfig = field(default_factory=JointStopConfig)
     board: BoardConfig = field(default_factory=BoardConfig)
     wind: WindConfig = field(default_factory=WindConfig)
+    target: TargetConfig = field(default_factory=TargetConfig)
     payloads: list[PayloadEvent] = field(default_factory=list)
     external_wrenches: list[ExternalWrenchEvent] = field(default_factory=list)
 
@@ -296,6 +389,10 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if not isinstance(value, list):
             raise ValueError(f"{path}: expected a list, got {value!r}")
         return [_convert(item_type, item, f"{path}[{k}]") for k, item in enumerate(value)]
+    if tp is type(None):
+        if value is not None:
+            raise ValueError(f"{path}: expected null, got {value!r}")
+        return None
     if origin in (typing.Union, types.UnionType):
         errors = []
         for option in typing.get_args(tp):
@@ -358,6 +455,14 @@ def scenario_from_dict(data: dict | None) -> Scenario:
     normal = np.asarray(scenario.board.normal, dtype=float)
     if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) < 1e-9:
         raise ValueError(f"board.normal: expected a non-zero 3-vector, got {scenario.board.normal}")
+    _validate_board(scenario.board, normal)
+    _validate_fan(scenario.wind.fan)
+    target = scenario.target
+    if not (len(target.position) == 3 and np.isfinite(target.position).all() and math.isfinite(target.yaw)):
+        raise ValueError(f"target: position needs 3 finite values and yaw a finite angle, got {target}")
+    if not (target.rate > 0.0 and math.isfinite(target.rate)) or target.position_noise < 0.0 \
+            or target.yaw_noise < 0.0:
+        raise ValueError("target.rate must be finite and > 0, target.position_noise and yaw_noise >= 0")
     for name in ("full_voltage", "empty_voltage", "capacity"):
         if getattr(scenario.battery, name) <= 0.0:
             raise ValueError(f"battery.{name}: must be > 0")
@@ -369,6 +474,38 @@ def scenario_from_dict(data: dict | None) -> Scenario:
     if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
         raise ValueError("px4.controller_rate and cameras.rate must be > 0")
     return scenario
+
+
+def _vector3(value: list[float] | None, name: str, nonzero: bool = False) -> np.ndarray:
+    vector = np.asarray(value, dtype=float)
+    if vector.shape != (3,) or not np.isfinite(vector).all() or (nonzero and np.linalg.norm(vector) < 1e-9):
+        raise ValueError(f"{name}: expected a {'non-zero ' if nonzero else ''}finite 3-vector, got {value}")
+    return vector
+
+
+def _validate_board(board: BoardConfig, normal: np.ndarray) -> None:
+    if len(board.size) != 2 or not all(s > 0.0 for s in board.size):
+        raise ValueError(f"board.size: expected two side lengths > 0 [m] (inf: unbounded), got {board.size}")
+    edge = _vector3(board.edge, "board.edge", nonzero=True)
+    unit = normal / np.linalg.norm(normal)
+    if np.linalg.norm(edge - (edge @ unit) * unit) < 1e-6 * np.linalg.norm(edge):
+        raise ValueError(f"board.edge {board.edge} is along board.normal: it must have a component in the plane")
+
+
+def _validate_fan(fan: FanConfig) -> None:
+    _vector3(fan.direction, "wind.fan.direction", nonzero=True)
+    if fan.position is not None:
+        _vector3(fan.position, "wind.fan.position")
+    if fan.reference_point is not None:
+        _vector3(fan.reference_point, "wind.fan.reference_point")
+    for name in ("diameter", "distance", "turbulence_time_constant", "decay_constant", "spreading_rate"):
+        value = getattr(fan, name)
+        if not (value > 0.0 and math.isfinite(value)):
+            raise ValueError(f"wind.fan.{name}: must be finite and > 0, got {value}")
+    for name in ("speed", "turbulence_intensity"):
+        value = getattr(fan, name)
+        if not (value >= 0.0 and math.isfinite(value)):
+            raise ValueError(f"wind.fan.{name}: must be finite and >= 0, got {value}")
 
 
 def load_scenario(path: str | None) -> Scenario:

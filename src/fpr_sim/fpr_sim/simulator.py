@@ -3,7 +3,10 @@ around :class:`fpr_sim.simulation.Simulation` (DESIGN.md §3, §5).
 
 Publishes ``/clock`` (rosgraph_msgs/Clock, ``clock_rate`` ≤ 250 Hz), ``/fpr/ground_truth`` (fpr_msgs/FprState),
 and per UAV ``/fpr/uav<i>/camera/image_raw`` + ``camera/camera_info`` (20 Hz), or ``/fpr/uav<i>/marker``
-(fpr_msgs/MarkerDetection) when ``cameras.emulated`` is set in the scenario or ``emulated_cameras`` is true.
+(fpr_msgs/MarkerDetection) when ``cameras.emulated`` is set in the scenario or ``emulated_cameras`` is true, and,
+when the scenario enables ``target``, ``/fpr/target`` (geometry_msgs/PoseStamped, frame ``flat_platform``, at
+``target.rate``): the noisy relative pose of the target of fpr_sim.target (thesis §4.4.2, (4.39)). Camera and
+target topics use the sensor-data QoS.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -25,6 +28,7 @@ from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
 from fpr_sim.scenario import load_scenario
 from fpr_sim.simulation import Simulation, SimulationOptions
+from fpr_sim.target import TARGET_FRAME, TargetEmulator
 
 
 def _stamp(t: float) -> Time:
@@ -87,6 +91,12 @@ class SimulatorNode(Node):
                                                              qos_profile_sensor_data))
                 self.info_pubs.append(self.create_publisher(CameraInfo, f"/fpr/uav{i}/camera/camera_info",
                                                             qos_profile_sensor_data))
+        self.target = (TargetEmulator(self.scenario.target, self.scenario.seed) if self.scenario.target.enabled
+                       else None)
+        self.target_pub = (self.create_publisher(PoseStamped, "/fpr/target", qos_profile_sensor_data)
+                           if self.target is not None else None)
+        self.target_period = 1.0 / self.scenario.target.rate
+        self._next_target = 0.0
         self._next_truth = 0.0
         self._next_camera = 0.0
         self._last_timeouts = 0
@@ -132,6 +142,9 @@ class SimulatorNode(Node):
         if self.cameras is not None and t + 1e-9 >= self._next_camera:
             self._next_camera += self.camera_period
             self._publish_cameras(t)
+        if self.target is not None and t + 1e-9 >= self._next_target:
+            self._next_target += self.target_period
+            self.target_pub.publish(self._target_message(t))
         if self.sim.lockstep_timeouts != self._last_timeouts:
             self._last_timeouts = self.sim.lockstep_timeouts
             self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
@@ -165,6 +178,16 @@ class SimulatorNode(Node):
         msg.contact_force = float(truth.contact_force)
         msg.payload_mass = float(truth.payload_mass)
         msg.battery_voltages = [float(v) for v in truth.battery_voltages]
+        return msg
+
+    def _target_message(self, t: float) -> PoseStamped:
+        """The emulated relative target pose now (fpr_sim.target) as a PoseStamped in F_Fp."""
+        state = self.sim.plant.state
+        pose = self.target.measure(state.position, state.quat)
+        msg = PoseStamped()
+        msg.header.stamp = _stamp(t)
+        msg.header.frame_id = TARGET_FRAME
+        msg.pose = _pose(pose.position, pose.quat)
         return msg
 
     def _publish_cameras(self, t: float) -> None:

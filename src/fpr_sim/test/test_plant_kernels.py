@@ -76,6 +76,32 @@ def test_board_force_scalar_matches_array_version():
         assert np.allclose(force_s, force, atol=1e-12)
 
 
+def test_finite_board_contact_only_over_the_board():
+    """A 30 x 20 cm board turned 45° in its plane (``edge``): contact only where the end-effector point's projection
+    is inside the rectangle; both versions agree; the default board is unbounded (the former behaviour)."""
+    board = {"enabled": True, "point": [0.0, 0.0, 1.0], "normal": [0.0, 0.0, -1.0], "size": [0.3, 0.2],
+             "edge": [1.0, 1.0, 0.0]}
+    env = Environment(scenario_from_dict({"board": board}))
+    assert np.allclose(env.board_u, np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0))
+    assert np.allclose(env.board_v, np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0))  # n × u
+    # (x, y) -> over the board: u = (x + y)/√2 within ±0.15, v = (x − y)/√2 within ±0.10
+    cases = {(0.0, 0.0): True, (0.1, 0.1): True, (-0.1, -0.1): True, (0.07, -0.07): True, (0.08, -0.08): False,
+             (0.11, 0.11): False, (0.2, 0.0): False, (0.0, 0.2): False, (0.3, 0.0): False}
+    for (x, y), inside in cases.items():
+        point, velocity = np.array([x, y, 1.002]), np.array([0.1, 0.0, 0.05])
+        force, normal = env.board_force(point, velocity)
+        force_s, normal_s = env.board_force_scalar(tuple(point), tuple(velocity))
+        assert (normal > 0.0) == inside, (x, y)
+        assert normal_s == pytest.approx(normal, abs=1e-12) and np.allclose(force_s, force, atol=1e-12)
+        assert env.board_force(point - [0.0, 0.0, 0.004], velocity)[1] == 0.0  # in front of the plane
+    unbounded = Environment(scenario_from_dict({"board": {"enabled": True, "point": [0.0, 0.0, 1.0]}}))
+    assert unbounded.board_force(np.array([50.0, -80.0, 1.001]), np.zeros(3))[1] == pytest.approx(5.0)
+    with pytest.raises(ValueError, match="board.size"):
+        scenario_from_dict({"board": {"size": [0.3, 0.0]}})
+    with pytest.raises(ValueError, match="board.edge"):
+        scenario_from_dict({"board": {"edge": [0.0, 0.0, 2.0]}})
+
+
 def test_fleet_state_reads_copies_and_battery_accepts_lists(kernel):
     scenario = scenario_from_dict({})
     fleet = QuadrotorFleet(3, scenario.quadrotor, scenario.px4, scenario.battery, kernel=kernel)
@@ -283,6 +309,13 @@ _STEP_SCENARIOS = {
                                                     "moment": [0.0, 0.01, 0.0]}]},
     "board_contact": {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
                       "board": {"enabled": True, "point": [0.0, 0.0, 1.5], "normal": [0.1, 0.0, -1.0]}},
+    "fan_turbulent_finite_board": {
+        "initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
+        "wind": {"velocity": [0.2, 0.0, 0.0], "fan": {"enabled": True, "speed": 6.0, "diameter": 0.8,
+                                                      "direction": [1.0, 0.3, 0.1], "turbulence_intensity": 0.3,
+                                                      "turbulence_time_constant": 0.02}},
+        "board": {"enabled": True, "point": [0.02, 0.0, 1.5], "normal": [0.1, 0.0, -1.0], "size": [0.3, 0.3],
+                  "edge": [1.0, 0.5, 0.0]}},
 }
 
 
@@ -350,3 +383,32 @@ def test_compiled_plant_step_matches_the_reference_in_the_joint_stops():
             assert np.allclose(b, a, rtol=1e-9, atol=1e-9), k
     assert engaged[0] and engaged[1]
     assert np.isfinite(plants[0]._x).all()
+
+
+def test_compiled_plant_step_matches_the_reference_across_a_board_edge():
+    """The end-effector point starts beside a finite board, behind its plane, and slides over it: no contact
+    first (an unbounded board would push at once), then contact; Python and C side by side."""
+    _require_compiled()
+    scenario = {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
+                "board": {"enabled": True, "point": [0.17, 0.0, 1.548], "normal": [0.0, 0.0, -1.0],
+                          "size": [0.3, 0.3], "edge": [1.0, 0.0, 0.0]}}
+    plants = [Plant(scenario_from_dict(scenario), kernel=k) for k in ("python", "compiled")]
+    state = plants[0].state
+    state.velocity = np.array([0.5, 0.0, 0.0])
+    n = plants[0].n
+    command = AttitudeCommand(plants[0].fleet.quat, np.full(n, 0.45), np.ones(n, dtype=bool))
+    for plant in plants:
+        plant.set_state(state)
+        plant.set_command(command)
+    contact = []
+    for k in range(120):
+        for plant in plants:
+            plant.step()
+        python, compiled = plants
+        assert np.allclose(compiled._x, python._x, rtol=1e-9, atol=1e-9), k
+        assert compiled._contact_force == pytest.approx(python._contact_force, abs=1e-7)
+        contact.append(python._contact_force)
+    contact = np.array(contact)
+    assert (contact[:30] == 0.0).all() and contact[50:].max() > 1.0  # over the board from x = 0.02 m (40 ms)
+    truth = [p.ground_truth() for p in plants]
+    assert np.allclose(truth[1].external_wrench, truth[0].external_wrench, atol=1e-8)

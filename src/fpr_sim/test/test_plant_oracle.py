@@ -24,6 +24,14 @@ within 45°-88°. board_push (legs to −107°) and payload_drop (−221° to +1
 with the stops disabled (plant_oracle_cases._NO_STOPS) and keep pinning the unstopped dynamics; the data file is
 the one of step 3, reproduced unchanged by both kernels.
 
+4. ``external_wrench`` of the three wind cases (wind_wrench, ground_takeoff, n4_ideal) only, when the reported
+   true τ_e (Plant.external_wrench) gained the legs' wind drag at their middles, which the dynamics always had
+   but the report left out (the fan's force on the legs must be in the ground truth). Updated in place, not
+   regenerated: the current plant was checked to reproduce every other array of the file (≤ 1e-10), and these
+   three to 1e-12 with the legs' drag removed from the report again; the physics did not change. The air
+   velocity became per body point (platform centre, quadrotors, leg middles, for the fan's jet): with a
+   uniform wind the arithmetic is the same as before.
+
 Both implementations of the plant replay the same frozen reference: the pure-Python one (the reference code)
 and the optional compiled kernel (fpr_sim._kernels, C): ``kernel`` is parametrized. The compiled variant fails
 (does not skip) when a C compiler exists but the kernel is missing, so a broken build cannot pass unseen.

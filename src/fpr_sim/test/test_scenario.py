@@ -62,3 +62,21 @@ def test_joint_stops_keys_and_ranges():
                 {"damping": -0.5}):
         with pytest.raises(ValueError, match="joint_stops"):
             scenario_from_dict({"joint_stops": bad})
+
+
+def test_fan_board_and_target_defaults_keep_the_former_behaviour():
+    import math
+
+    scenario = scenario_from_dict({})
+    fan = scenario.wind.fan
+    assert not fan.enabled and fan.position is None and fan.reference_point is None
+    assert fan.speed == 26.0 / 3.6 and fan.direction == [1.0, 0.0, 0.0]
+    assert scenario.board.size == [math.inf, math.inf] and not scenario.target.enabled
+    custom = scenario_from_dict({"wind": {"fan": {"enabled": True, "position": [-3, 0, 1], "speed": 3.61,
+                                                  "reference_point": None}},
+                                 "board": {"size": [0.3, ".inf"], "edge": [0, 1, 0]},
+                                 "target": {"enabled": True, "position": [0.1, 0.0, 1.85], "yaw": 0.3}})
+    assert custom.wind.fan.position == [-3.0, 0.0, 1.0] and custom.wind.fan.reference_point is None
+    assert custom.board.size == [0.3, math.inf] and custom.target.yaw == 0.3
+    with pytest.raises(ValueError, match="wind.fan.position"):
+        scenario_from_dict({"wind": {"fan": {"position": 3.0}}})

@@ -3,6 +3,7 @@
 import threading
 import time
 
+import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
@@ -53,6 +54,55 @@ def test_simulator_node_publishes_clock_truth_and_images():
         assert images and images[-1].encoding == "mono8" and images[-1].width == 640
     finally:
         rclpy.shutdown()
+
+
+def test_simulator_node_publishes_the_emulated_target(tmp_path):
+    """Scenario ``target`` enabled: /fpr/target (PoseStamped, sensor-data QoS) at 50 Hz of simulation time, in the
+    flat platform frame, stamped with the simulation time (the values: fpr_sim.target, test_target.py)."""
+    from geometry_msgs.msg import PoseStamped
+
+    scenario = tmp_path / "target.yaml"
+    scenario.write_text("name: target\ncameras: {enabled: false}\n"
+                        "target: {enabled: true, position: [1.0, 0.5, 2.0], yaw: 0.4, position_noise: 0.0, "
+                        "yaw_noise: 0.0}\n")
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import SimulatorNode
+
+        listener = rclpy.create_node("target_listener")
+        targets = []
+        listener.create_subscription(PoseStamped, "/fpr/target", targets.append, qos_profile_sensor_data)
+        overrides = [Parameter("real_time_factor", value=1.0), Parameter("duration", value=0.5),
+                     Parameter("scenario_file", value=str(scenario)), Parameter("local_base_port", value=0),
+                     Parameter("remote_base_port", value=0)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        executor = SingleThreadedExecutor()
+        executor.add_node(listener)
+        deadline = time.monotonic() + 5.0
+        while sim_node.target_pub.get_subscription_count() == 0:
+            executor.spin_once(timeout_sec=0.05)
+            assert time.monotonic() < deadline, "discovery timed out"
+        thread = threading.Thread(target=sim_node.run)
+        thread.start()
+        while thread.is_alive():
+            executor.spin_once(timeout_sec=0.02)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.02)
+        thread.join()
+        platform = sim_node.sim.plant.state.position
+        sim_node.destroy_node()
+        listener.destroy_node()
+    finally:
+        rclpy.shutdown()
+    assert 20 <= len(targets) <= 26  # 50 Hz over 0.5 s (sensor-data QoS: best effort)
+    last = targets[-1]
+    assert last.header.frame_id == "flat_platform"
+    stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in targets]
+    # the first one on the first /clock period (due at t = 0, as /fpr/ground_truth), then every 20 ms
+    assert all(b - a == pytest.approx(0.02, abs=1e-6) for a, b in zip(stamps[1:], stamps[2:], strict=False))
+    assert last.pose.position.x == pytest.approx(1.0 - platform[0], abs=0.01)  # the robot rests at yaw 0
+    assert last.pose.position.z == pytest.approx(2.0 - platform[2], abs=0.01)
+    assert last.pose.orientation.z == pytest.approx(np.sin(0.2), abs=1e-3)
 
 
 @pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])

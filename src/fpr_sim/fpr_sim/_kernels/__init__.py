@@ -41,7 +41,7 @@ __all__ = ["KERNEL_CHOICES", "KERNEL_ENV", "KernelStatus", "PlantKernel", "QuadK
 KERNEL_ENV = "FPR_SIM_KERNEL"
 KERNEL_CHOICES = ("auto", "compiled", "python")
 #: must equal FPR_KERNEL_ABI in plant_kernel.c
-_ABI = 2
+_ABI = 3
 _LIBRARY_STEM = "_fpr_plant_kernel"
 _SOURCE = Path(__file__).with_name("plant_kernel.c")
 _LOG = logging.getLogger("fpr_sim.kernels")
@@ -93,6 +93,7 @@ def _plant_model_type(max_n: int) -> type[ctypes.Structure]:
                     ("platform_drag", ctypes.c_double), ("board_enabled", ctypes.c_int),
                     ("board_normal", vec), ("board_point", vec), ("board_stiffness", ctypes.c_double),
                     ("board_damping", ctypes.c_double), ("board_friction", ctypes.c_double),
+                    ("board_u", vec), ("board_v", vec), ("board_half_size", ctypes.c_double * 2),
                     ("end_effector", vec), ("joint_stops_enabled", ctypes.c_int),
                     ("joint_stop_lower", ctypes.c_double), ("joint_stop_upper", ctypes.c_double),
                     ("joint_stop_stiffness", ctypes.c_double), ("joint_stop_damping", ctypes.c_double),
@@ -433,6 +434,9 @@ class PlantKernel:
         model.board_stiffness = float(board.stiffness)
         model.board_damping = float(board.damping)
         model.board_friction = float(board.friction)
+        _fill(model.board_u, env._board_u)
+        _fill(model.board_v, env._board_v)
+        _fill(model.board_half_size, env.board_half_size)
         _fill(model.end_effector, plant._end_effector)
         stops = plant._joint_stops
         model.joint_stops_enabled = int(stops is not None)
@@ -452,19 +456,20 @@ class PlantKernel:
         self._basis_pointer = 0
         self._anchors = None
         self._anchors_pointer = 0
+        self._still_air = [0.0] * (3 * (1 + 2 * n))
 
     def advance(self, plant) -> bool:
         """Advance ``plant`` by one step in C (Plant.step's body after the scheduling); False (nothing
         changed) when the kernel refuses (singular mass matrix): the caller runs the Python reference."""
         n = self.n
         fleet = plant.fleet
-        wind = plant._wind_list
+        wind = plant._air_list  # 3 (1 + 2n) air velocities [P, B_1..B_n, leg middles] or None
         io = self._io
         io[:self._inputs] = list(chain(
             plant._x_list, chain.from_iterable(fleet._quat), chain.from_iterable(fleet._rate),
             chain.from_iterable(fleet._rotors), chain.from_iterable(fleet._rotor_commands),
             fleet.battery._charge_used, chain.from_iterable(plant._tip_velocity_list), plant._yaw_anchors,
-            (0.0, 0.0, 0.0) if wind is None else wind, plant._platform_force_list, plant._platform_moment_list))
+            self._still_air if wind is None else wind, plant._platform_force_list, plant._platform_moment_list))
         basis = plant.structure._basis
         if basis is not self._basis:  # a new basis after a payload change
             self._basis_pointer = _pointer(basis, (1 + 4 * n, (6 + n) ** 2))
@@ -481,8 +486,12 @@ class PlantKernel:
         out = io.tolist()
         layout = self._layout
         x, v, a, y = layout["x"], layout["tip_velocity"], layout["tip_acceleration"], layout["yaw_anchors"]
+        p = layout["tip_position"]
         plant._set_x(out[x:x + 13 + 2 * n])
         plant._tip_velocity_list = [out[v + 3 * i:v + 3 * i + 3] for i in range(n)]
+        # the tip kinematics of the new state (the kernel computed them): the next step's fan evaluation uses them
+        plant._tips = ([tuple(out[p + 3 * i:p + 3 * i + 3]) for i in range(n)],
+                       [tuple(v_i) for v_i in plant._tip_velocity_list])
         plant._tip_acceleration_list = [out[a + 3 * i:a + 3 * i + 3] for i in range(n)]
         plant._yaw_anchors = out[y:y + n]
         plant._contact_force = out[layout["contact"]]

@@ -28,7 +28,7 @@
 #endif
 
 /* Bumped whenever a struct, a buffer layout or a function signature changes (checked by the loader). */
-#define FPR_KERNEL_ABI 2
+#define FPR_KERNEL_ABI 3
 #define FPR_MAX_N 16
 #define FPR_MAX_N9 (6 + FPR_MAX_N)
 /* math.pi (M_PI is not C99) */
@@ -81,6 +81,8 @@ typedef struct {
     int board_enabled;
     double board_normal[3], board_point[3];
     double board_stiffness, board_damping, board_friction;
+    double board_u[3], board_v[3];    /* in-plane unit axes of the board's rectangle (world) */
+    double board_half_size[2];        /* half side lengths along board_u, board_v [m] (inf: unbounded) */
     double end_effector[3];           /* in Fp [m] */
     int joint_stops_enabled;          /* legs' mechanical stops (JointStopConfig) */
     double joint_stop_lower, joint_stop_upper;  /* [rad] */
@@ -95,7 +97,8 @@ typedef struct {
 enum { FPR_LAYOUT_PLANT = 0, FPR_LAYOUT_CONTROL = 1, FPR_LAYOUT_QUAD = 2, FPR_LAYOUT_ACCELERATE = 3 };
 
 /* plant step buffer: inputs first (x .. platform moment), then outputs; x, quat, rate, rotors, charge,
-   tip velocity and yaw anchors are updated in place */
+   tip velocity and yaw anchors are updated in place. P_WIND: the air velocities (world) held over the step at
+   the platform centre, the n quadrotors and the n leg middles, 3 (1 + 2n) doubles (Plant._air_velocities). */
 enum {
     P_X, P_QUAT, P_RATE, P_ROTORS, P_ROTOR_CMD, P_CHARGE, P_TIP_VEL, P_YAW_ANCHOR, P_WIND, P_PFORCE, P_PMOMENT,
     P_CURRENT, P_TIP_POS, P_TIP_ACC, P_CONTACT, P_GROUND_ACTIVE, P_SIZE, P_COUNT
@@ -112,7 +115,8 @@ enum { A_COS, A_SIN, A_XI, A_GRAVITY, A_FORCE, A_OUT, A_SIZE, A_COUNT };
 
 static int plant_layout(int n, int *o)
 {
-    int sizes[P_COUNT - 1] = {13 + 2 * n, 4 * n, 3 * n, 4 * n, 4 * n, n, 3 * n, n, 3, 3, 3, n, 3 * n, 3 * n, 1, 1};
+    int sizes[P_COUNT - 1] = {13 + 2 * n, 4 * n, 3 * n, 4 * n, 4 * n, n, 3 * n, n, 3 * (1 + 2 * n), 3, 3, n, 3 * n,
+                              3 * n, 1, 1};
     int k, at = 0;
     for (k = 0; k < P_SIZE; ++k) {
         o[k] = at;
@@ -406,13 +410,20 @@ static void ground_update_anchor(const FprPlantModel *m, double *anchor, double 
 /* Environment.board_force_scalar: board contact force (world) on the end-effector; returns the normal force. */
 static double board_force(const FprPlantModel *m, const double *point, const double *velocity, double *f)
 {
-    const double *nv = m->board_normal, *bp = m->board_point;
-    double depth, normal_speed, normal, t0, t1, t2, scale;
+    const double *nv = m->board_normal, *bp = m->board_point, *bu = m->board_u, *bv = m->board_v;
+    double depth, normal_speed, normal, t0, t1, t2, scale, o0, o1, o2;
     f[0] = f[1] = f[2] = 0.0;
     if (!m->board_enabled)
         return 0.0;
-    depth = -((point[0] - bp[0]) * nv[0] + (point[1] - bp[1]) * nv[1] + (point[2] - bp[2]) * nv[2]);
+    o0 = point[0] - bp[0];
+    o1 = point[1] - bp[1];
+    o2 = point[2] - bp[2];
+    depth = -(o0 * nv[0] + o1 * nv[1] + o2 * nv[2]);
     if (depth <= 0.0)
+        return 0.0;
+    /* over the board's rectangle only (beside it: no contact) */
+    if (!(fabs(o0 * bu[0] + o1 * bu[1] + o2 * bu[2]) <= m->board_half_size[0]
+          && fabs(o0 * bv[0] + o1 * bv[1] + o2 * bv[2]) <= m->board_half_size[1]))
         return 0.0;
     normal_speed = velocity[0] * nv[0] + velocity[1] * nv[1] + velocity[2] * nv[2];
     normal = py_max(0.0, m->board_stiffness * depth - m->board_damping * normal_speed);
@@ -443,7 +454,7 @@ static double joint_stop_moment(const FprPlantModel *m, double theta, double rat
 typedef struct {
     const double *thrust;   /* (n, 3) world thrust vectors [N] */
     int ground;             /* ground contact evaluated */
-    const double *wind;     /* air velocity (3) or NULL */
+    const double *wind;     /* air velocities (3 (1 + 2n): P, quadrotors, leg middles) or NULL */
     const double *anchors;  /* ground anchors (n+1, 2) */
     const double *pforce;   /* platform force (world, at P) */
     const double *pmoment;  /* platform moment (Fp) */
@@ -502,7 +513,8 @@ static int plant_derivative(const FprPlantModel *m, const double *basis, const d
                 f2 += gf[2];
             }
             if (wind != NULL) {
-                const double air0 = wind[0], air1 = wind[1], air2 = wind[2];
+                const double *uav_air = wind + 3 + 3 * i, *mid_air = wind + 3 + 3 * n + 3 * i;
+                const double air0 = uav_air[0], air1 = uav_air[1], air2 = uav_air[2];
                 const double drag = m->uav_drag;
                 const double h0 = 0.5 * (t0 + a0), h1 = 0.5 * (t1 + a1), h2 = 0.5 * (t2 + a2);
                 const double hl = 0.5 * lr;
@@ -513,9 +525,9 @@ static int plant_derivative(const FprPlantModel *m, const double *basis, const d
                 b0 = u0 + w1 * h2 - w2 * h1 + hl * n0;
                 b1 = u1 + w2 * h0 - w0 * h2 + hl * n1;
                 b2 = u2 + w0 * h1 - w1 * h0 + hl * n2;
-                d0 = m->leg_drag * (air0 - (r[0] * b0 + r[1] * b1 + r[2] * b2));
-                d1 = m->leg_drag * (air1 - (r[3] * b0 + r[4] * b1 + r[5] * b2));
-                d2 = m->leg_drag * (air2 - (r[6] * b0 + r[7] * b1 + r[8] * b2));
+                d0 = m->leg_drag * (mid_air[0] - (r[0] * b0 + r[1] * b1 + r[2] * b2));
+                d1 = m->leg_drag * (mid_air[1] - (r[3] * b0 + r[4] * b1 + r[5] * b2));
+                d2 = m->leg_drag * (mid_air[2] - (r[6] * b0 + r[7] * b1 + r[8] * b2));
                 mid0 = r[0] * d0 + r[3] * d1 + r[6] * d2;
                 mid1 = r[1] * d0 + r[4] * d1 + r[7] * d2;
                 mid2 = r[2] * d0 + r[5] * d1 + r[8] * d2;
@@ -889,7 +901,7 @@ static int plant_step(const FprPlantModel *m, const double *basis, double *ancho
         const double *wind = io + o[P_WIND];
         for (i = 0; i < n; ++i)
             for (k = 0; k < 3; ++k)
-                env_uav[3 * i + k] += m->uav_drag * (wind[k] - new_vel[3 * i + k]);
+                env_uav[3 * i + k] += m->uav_drag * (wind[3 + 3 * i + k] - new_vel[3 * i + k]);
     }
     /* spherical-joint offset moment (2.93), body frame */
     {
