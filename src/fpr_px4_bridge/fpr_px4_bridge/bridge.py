@@ -19,7 +19,11 @@ simulator's PX4 emulator uses it for its lockstep (a repetition of an old setpoi
 controller's output for a new control period, fpr_sim.simulation).
 
 Thrust: newtons -> PX4 normalized thrust by (C.1)-(C.2) with the live battery voltage (:mod:`fpr_model.battery`),
-clamped to [thrust_min, 1]. The caller serializes access (one lock).
+clamped to [thrust_min, 1] (``battery_compensation``, the default: the thrust regulation of thesis Appendix C).
+With ``battery_compensation`` off, f_max is taken at the fixed ``nominal_voltage`` instead, whatever PX4 reports,
+as in the first Exp. I flights before the thrust regulation (thesis §3.5.1, l.5016-5020): the produced thrust then
+falls as the battery sags, and the observers see a slowly growing negative z external force.
+The caller serializes access (one lock).
 """
 
 from __future__ import annotations
@@ -59,6 +63,10 @@ class BridgeConfig:
     a_f: float = 8.02                     #: [N/V] (C.2) slope of this vehicle (Table C.1)
     b_f: float = -61.66                   #: [N] (C.2) offset of this vehicle (Table C.1)
     fallback_voltage: float = 12.0        #: [V] used while no (valid) battery voltage is known
+    #: True: f_max (C.2) at the reported battery voltage (Appendix C thrust regulation); False: at nominal_voltage
+    battery_compensation: bool = True
+    #: [V] f_max voltage without battery compensation: 12.4 V, the charged 3S voltage (fpr_sim BatteryConfig)
+    nominal_voltage: float = 12.4
     quaternion_tolerance: float = 1e-3    #: refuse setpoints with | |q| - 1 | above this
     heartbeat_period: float = 1.0         #: [s] our HEARTBEAT period
     offboard: OffboardConfig = OffboardConfig()
@@ -70,10 +78,21 @@ class BridgeConfig:
             raise ValueError(f"setpoint_timeout must be > 0, got {self.setpoint_timeout}")
         if not 0.0 <= self.thrust_min < 1.0:
             raise ValueError(f"thrust_min must be in [0, 1), got {self.thrust_min}")
-        if not all(math.isfinite(v) for v in (self.a_f, self.b_f, self.fallback_voltage)):
-            raise ValueError("a_f, b_f and fallback_voltage must be finite")
+        if not all(math.isfinite(v) for v in (self.a_f, self.b_f, self.fallback_voltage, self.nominal_voltage)):
+            raise ValueError("a_f, b_f, fallback_voltage and nominal_voltage must be finite")
         if self.a_f * self.fallback_voltage + self.b_f <= 0.0:
             raise ValueError("f_max at fallback_voltage must be > 0 (check a_f, b_f, fallback_voltage)")
+        if not self.battery_compensation and self.a_f * self.nominal_voltage + self.b_f <= 0.0:
+            raise ValueError("f_max at nominal_voltage must be > 0 (check a_f, b_f, nominal_voltage)")
+
+    def thrust_normalization(self) -> str:
+        """One line for a start-up log: how newtons become PX4's normalized thrust."""
+        if self.battery_compensation:
+            return (f"battery compensation on: f_max = a_f*V + b_f (a_f {self.a_f} N/V, b_f {self.b_f} N) at the "
+                    f"voltage V PX4 reports (fallback {self.fallback_voltage} V)")
+        f_max = self.a_f * self.nominal_voltage + self.b_f
+        return (f"battery compensation OFF: fixed f_max = {f_max:.2f} N at nominal_voltage {self.nominal_voltage} V "
+                "(the true thrust falls as the battery sags)")
 
 
 @dataclass(frozen=True)
@@ -195,8 +214,11 @@ class Px4Bridge:
         return battery.voltage
 
     def normalized_thrust(self, thrust_newton: float, now: float) -> float:
-        """(C.1)-(C.2) with the live voltage; the fallback voltage when it is unknown or outside the model."""
+        """(C.1)-(C.2) with the live voltage; the fallback voltage when it is unknown or outside the model. Without
+        battery compensation (config) the fixed ``nominal_voltage``: independent of what PX4 reports."""
         cfg = self.config
+        if not cfg.battery_compensation:
+            return normalized_thrust(thrust_newton, cfg.nominal_voltage, cfg.a_f, cfg.b_f, cfg.thrust_min)
         voltage = self.battery_voltage(now)
         if math.isfinite(voltage):
             try:

@@ -6,6 +6,8 @@ publishes ``imu`` (sensor_msgs/Imu), ``velocity_body`` (geometry_msgs/TwistStamp
 (sensor_msgs/BatteryState) and ``status`` (fpr_msgs/UavStatus). All times come from the node clock
 (``use_sim_time`` honoured). Each SET_ATTITUDE_TARGET carries the setpoint's header stamp on PX4's boot clock
 in ``time_boot_ms`` (ignored by real PX4; used by the simulator's lockstep), see :mod:`fpr_px4_bridge.bridge`.
+Thrust normalization: ``battery_compensation`` (default true: f_max (C.2) at the reported voltage) or, false, at
+the fixed ``nominal_voltage`` (12.4 V); the choice is logged once at start.
 """
 
 from __future__ import annotations
@@ -46,6 +48,10 @@ _PARAMETERS = {
     "a_f": (math.nan, "[N/V] max-thrust slope (C.2); NaN: thesis Table C.1 value of uav_id"),
     "b_f": (math.nan, "[N] max-thrust offset (C.2); NaN: thesis Table C.1 value of uav_id"),
     "fallback_voltage": (12.0, "[V] battery voltage used while PX4 reports none"),
+    "battery_compensation": (True, "true: f_max (C.2) at the reported battery voltage (Appendix C thrust "
+                                   "regulation); false: at nominal_voltage, the thrust falls as the battery sags "
+                                   "(the first Exp. I flights, thesis §3.5.1)"),
+    "nominal_voltage": (12.4, "[V] f_max voltage when battery_compensation is false (charged 3S)"),
     "quaternion_tolerance": (1e-3, "setpoints with | |q| - 1 | above this are refused"),
     "heartbeat_timeout": (1.5, "[s] no PX4 HEARTBEAT for this long: DISCONNECTED"),
     "offboard_warmup": (1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)"),
@@ -104,6 +110,7 @@ class Px4BridgeNode(Node):
             uav_id=uav_id, target_system=target_system, target_component=int(p["target_component"]),
             stream_rate=float(p["stream_rate"]), setpoint_timeout=float(p["setpoint_timeout"]),
             thrust_min=float(p["thrust_min"]), a_f=a_f, b_f=b_f, fallback_voltage=float(p["fallback_voltage"]),
+            battery_compensation=bool(p["battery_compensation"]), nominal_voltage=float(p["nominal_voltage"]),
             quaternion_tolerance=float(p["quaternion_tolerance"]),
             offboard=OffboardConfig(
                 heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),
@@ -138,6 +145,7 @@ class Px4BridgeNode(Node):
             f"px4_bridge uav {uav_id}: {url} (bound {address}), PX4 system {target_system}, "
             f"stream {self.config.stream_rate:.0f} Hz, signing {'on' if key else 'off'}, "
             f"a_f={a_f} N/V b_f={b_f} N")
+        self.get_logger().info(f"thrust normalization: {self.config.thrust_normalization()}")
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

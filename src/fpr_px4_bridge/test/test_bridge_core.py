@@ -134,6 +134,64 @@ def test_wire_content_is_ned_frd_attitude_and_battery_normalized_thrust(setup):
     assert bridge.normalized_thrust(12.0, 100.0) == pytest.approx(12.0 / (8.02 * 12.0 - 61.66))
 
 
+def _report_voltage(bridge, peer, volts: float, now: float) -> None:
+    peer.send(peer.mav.sys_status_encode(
+        onboard_control_sensors_present=0, onboard_control_sensors_enabled=0, onboard_control_sensors_health=0,
+        load=0, voltage_battery=int(round(volts * 1000)), current_battery=-1, battery_remaining=-1,
+        drop_rate_comm=0, errors_comm=0, errors_count1=0, errors_count2=0, errors_count3=0, errors_count4=0))
+    samples = bridge.poll(now, timeout=1.0)
+    assert isinstance(samples[0], BatterySample) and samples[0].voltage == pytest.approx(volts)
+
+
+def test_without_battery_compensation_the_thrust_is_normalized_at_the_nominal_voltage():
+    """battery_compensation false (the first Exp. I flights, thesis §3.5.1): f_max at nominal_voltage whatever
+    the reported voltage (or none, or one outside the model), so the same newtons give the same u_f as the battery
+    sags; on (default), u_f follows the voltage."""
+    link = MavlinkLink("udp://127.0.0.1:0", system_id=1, target_system=1)
+    config = BridgeConfig(uav_id=1, battery_compensation=False, offboard=OffboardConfig(offboard_warmup=1.0))
+    assert config.nominal_voltage == 12.4 and BridgeConfig().battery_compensation
+    bridge = Px4Bridge(config, link)
+    peer = Peer(link.local_address)
+    compensated_link = MavlinkLink("udp://127.0.0.1:0", system_id=1, target_system=1)
+    compensated = Px4Bridge(BridgeConfig(uav_id=1), compensated_link)
+    compensated_peer = Peer(compensated_link.local_address)
+    try:
+        nominal = normalized_thrust(12.0, 12.4, 8.02, -61.66, 0.05)
+        assert nominal == pytest.approx(12.0 / (8.02 * 12.4 - 61.66))
+        assert bridge.normalized_thrust(12.0, 0.0) == nominal  # no voltage yet
+        connect(bridge, peer, 0.0)
+        connect(compensated, compensated_peer, 0.0)
+        seen = []
+        for k, volts in enumerate((12.4, 11.8, 11.1, 10.5)):
+            now = 0.1 * (k + 1)
+            _report_voltage(bridge, peer, volts, now)
+            _report_voltage(compensated, compensated_peer, volts, now)
+            assert bridge.normalized_thrust(12.0, now) == nominal
+            assert compensated.normalized_thrust(12.0, now) == pytest.approx(
+                normalized_thrust(12.0, volts, 8.02, -61.66, 0.05))
+            seen.append(compensated.normalized_thrust(12.0, now))
+        assert all(a < b for a, b in zip(seen, seen[1:], strict=False))  # compensated: more u_f as V drops
+        _report_voltage(bridge, peer, 5.0, 0.5)  # outside the model: no fallback needed when off
+        assert bridge.normalized_thrust(12.0, 0.5) == nominal and bridge.voltage_fallbacks == 0
+        # and on the wire
+        bridge.on_teleop(TeleopMode.ARM, 0.6)
+        bridge.tick(0.6)
+        assert bridge.submit_setpoint(Q_NORTH, 12.0, 1, 0.61).sent
+        m = kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")[-1][1]
+        assert m.thrust == pytest.approx(nominal, abs=1e-6)
+        assert "OFF" in config.thrust_normalization() and "12.4 V" in config.thrust_normalization()
+        assert "on" in BridgeConfig().thrust_normalization()
+    finally:
+        for closing in (link, compensated_link):
+            closing.close()
+        peer.sock.close()
+        compensated_peer.sock.close()
+    with pytest.raises(ValueError, match="nominal_voltage"):
+        BridgeConfig(battery_compensation=False, nominal_voltage=7.0)  # f_max <= 0 there
+    with pytest.raises(ValueError, match="nominal_voltage"):
+        BridgeConfig(nominal_voltage=math.nan)
+
+
 @pytest.mark.parametrize(
     "q, thrust, uav_id",
     [

@@ -8,20 +8,22 @@ All forces are world-frame (ENU) newtons at world points; the plant maps them on
   end-effector point while it is over the board's rectangle (``size`` along ``edge`` and ``normal × edge``,
   unbounded by default), Coulomb friction regularised below 1 cm/s; the true normal force is reported.
 - Wind: air velocity = uniform part ``w(t)`` (constant + half-sine gusts) + the jet of a wind generator
-  (:class:`FanJet`, evaluated at each body point), linear drag ``c (w − v)`` on the platform centre, each leg's
-  middle and each quadrotor.
-- Payload: point mass at P, attached/released at scheduled times.
+  (:class:`FanJet`, evaluated at each body point, switched on / ramped / off on its schedule), linear drag
+  ``c (w − v)`` on the platform centre, each leg's middle and each quadrotor.
+- Payload: point masses at P, attached/released at scheduled times, or picked up when P comes near a hanging
+  load (:meth:`Environment.payload_mass`, scenario ``payloads``).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from fpr_sim.scenario import BoardConfig, FanConfig, GroundConfig, Scenario
+from fpr_sim.scenario import BoardConfig, FanConfig, GroundConfig, PayloadEvent, Scenario
 
-__all__ = ["FAN_SEED_STREAM", "Environment", "FanJet", "GroundContacts", "board_axes"]
+__all__ = ["FAN_SEED_STREAM", "Environment", "FanJet", "GroundContacts", "PayloadChange", "board_axes"]
 
 #: the fan turbulence draws from ``SeedSequence([scenario.seed, FAN_SEED_STREAM])`` (the cameras use 7)
 FAN_SEED_STREAM = 11
@@ -64,6 +66,11 @@ class FanJet:
     over the mean speed (4-7 m/s). Samples are on the grid of the physics step ``dt``: the turbulence at time t
     is the sample of step ``round(t/dt)``, a pure function of the seed and the step (queries must not go back
     in time; an earlier time gets the latest sample).
+
+    Schedule (``start_time``, ``ramp_time``, ``end_time``): the mean velocity and the turbulence are both scaled by
+    :meth:`speed_factor` s(t) ∈ [0, 1] (0 before the start and from the end on, a linear spin-up over
+    ``ramp_time``), so the fluctuation stays ``I·s(t)·U(x, r)``: zero while the fan is off. ξ(t) itself runs on
+    regardless (the same seeded sequence whatever the schedule).
     """
 
     def __init__(self, config: FanConfig, seed: int, dt: float, reference_point) -> None:
@@ -81,11 +88,14 @@ class FanJet:
         self._half_width = 0.5 * config.diameter  # [m]
         self._spreading = config.spreading_rate
         self.outlet_speed = 1.0  # U_0 [m/s]: set below from the reference point
-        shape = self.mean_speed(self.reference_point)
+        shape = self._steady_speed(self.reference_point)
         if not shape > 1e-3:
             raise ValueError(f"wind.fan: the reference point {self.reference_point} is not in the jet (relative "
                              f"speed {shape:.2g} of the outlet's; outlet {self.origin}, axis {self.axis})")
         self.outlet_speed = float(config.speed) / shape
+        self.start_time = float(config.start_time)  #: [s] the fan switches on
+        self.ramp_time = float(config.ramp_time)  #: [s] linear spin-up (0: a step)
+        self.end_time = float(config.end_time)  #: [s] the fan stops (inf: never)
         self.intensity = float(config.turbulence_intensity)
         self.dt = float(dt)
         self._a = math.exp(-self.dt / config.turbulence_time_constant)
@@ -95,8 +105,25 @@ class FanJet:
         self._index = 0
         self._draws: list[list[float]] = []
 
-    def mean_speed(self, point) -> float:
-        """U(x, r) [m/s] at a world point [m] (the mean air velocity there is U times the axis)."""
+    def speed_factor(self, t: float) -> float:
+        """s(t) [-]: the fraction of the full mean speed (and of the turbulence) blowing at time ``t`` [s]: 0 before
+        ``start_time`` and from ``end_time`` on, ``min(1, (t − start_time) / ramp_time)`` in between (1 without
+        a ramp)."""
+        if not self.start_time <= t < self.end_time:
+            return 0.0
+        if self.ramp_time > 0.0:
+            return min(1.0, (t - self.start_time) / self.ramp_time)
+        return 1.0
+
+    def mean_speed(self, point, t: float | None = None) -> float:
+        """U(x, r) [m/s] at a world point [m] (the mean air velocity there is U times the axis), at time ``t`` [s]
+        (× :meth:`speed_factor`) or, with ``t`` None, at full speed (the fan's steady profile)."""
+        scale = 1.0 if t is None else self.speed_factor(t)
+        if scale == 0.0:
+            return 0.0
+        return scale * self._steady_speed(point)
+
+    def _steady_speed(self, point) -> float:
         ox, oy, oz = self.origin
         ax, ay, az = self.axis
         dx, dy, dz = point[0] - ox, point[1] - oy, point[2] - oz
@@ -125,13 +152,18 @@ class FanJet:
         return self._xi[0], self._xi[1], self._xi[2]
 
     def velocities(self, t: float, points) -> list[tuple[float, float, float]]:
-        """Air velocity [m/s] (world) of the jet at time t at each world point [m] (mean + turbulence)."""
+        """Air velocity [m/s] (world) of the jet at time t at each world point [m] (mean + turbulence, both
+        scaled by :meth:`speed_factor`)."""
+        scale = self.speed_factor(t)
+        if scale == 0.0:  # off: still air (ξ is drawn lazily, so skipping it keeps the seeded sequence)
+            return [(0.0, 0.0, 0.0)] * len(points)
         x0, x1, x2 = self.turbulence(t)
         ax, ay, az = self.axis
         i = self.intensity
         c0, c1, c2 = ax + i * x0, ay + i * x1, az + i * x2
         ox, oy, oz = self.origin
-        core, half_width, spreading, outlet = self._core, self._half_width, self._spreading, self.outlet_speed
+        core, half_width, spreading = self._core, self._half_width, self._spreading
+        outlet = self.outlet_speed * scale
         out = []
         for px, py, pz in points:  # mean_speed, inlined (the 1 kHz loop)
             dx, dy, dz = px - ox, py - oy, pz - oz
@@ -144,6 +176,32 @@ class FanJet:
             u = outlet * min(1.0, core / x) * math.exp(-_LN2 * r2 / (b * b))
             out.append((u * c0, u * c1, u * c2))
         return out
+
+
+@dataclass(frozen=True)
+class PayloadChange:
+    """A payload attached to or released from P (:attr:`Environment.payload_changes`, in time order)."""
+
+    time: float  #: [s] the step (start) at which it changed
+    index: int  #: its index in ``scenario.payloads``
+    attached: bool  #: True: attached (picked up), False: released
+    mass: float  #: [kg]
+    pickup: bool  #: a pick-up payload (``pickup_position`` set), else timed
+    distance: float  #: [m] |P − pickup_position| when a pick-up payload attached, else NaN
+
+
+class _PayloadSchedule:
+    """The attach / release logic of :class:`~fpr_sim.scenario.PayloadEvent` (see its doc)."""
+
+    __slots__ = ("attach_time", "hold_time", "mass", "pickup", "radius2", "release_time")
+
+    def __init__(self, event: PayloadEvent) -> None:
+        self.mass = float(event.mass)
+        self.attach_time = float(event.attach_time)
+        self.release_time = float(event.release_time)
+        self.hold_time = float(event.hold_time) if event.hold_time > 0.0 else math.inf
+        self.pickup = None if event.pickup_position is None else tuple(float(v) for v in event.pickup_position)
+        self.radius2 = float(event.pickup_radius) ** 2
 
 
 class GroundContacts:
@@ -236,6 +294,12 @@ class Environment:
         #: the wind generator's jet (:meth:`attach_fan`, called by the plant once it knows the initial state)
         self.fan: FanJet | None = None
         self.has_wind = bool(np.any(self.wind_constant != 0.0) or scenario.wind.gusts or scenario.wind.fan.enabled)
+        self._payloads = [_PayloadSchedule(p) for p in scenario.payloads]
+        #: [s] per payload: when a pick-up payload attached (NaN: not (yet) picked up, or a timed payload)
+        self.pickup_times: list[float] = [math.nan] * len(self._payloads)
+        self._attached = [False] * len(self._payloads)
+        #: every attach and release so far, in time order (seen by :meth:`payload_mass`; the simulator logs them)
+        self.payload_changes: list[PayloadChange] = []
 
     def attach_fan(self, default_reference_point, dt: float) -> FanJet | None:
         """Build the fan's jet when ``wind.fan`` is enabled: ``default_reference_point`` [m] (world) is used when
@@ -245,9 +309,36 @@ class Environment:
         self.fan = FanJet(fan, self.scenario.seed, dt, default_reference_point) if fan.enabled else None
         return self.fan
 
-    def payload_mass(self, t: float) -> float:
-        """Total payload attached to P at time ``t`` [kg]."""
-        return float(sum(p.mass for p in self.scenario.payloads if p.attach_time <= t < p.release_time))
+    def payload_mass(self, t: float, position=None) -> float:
+        """Total payload attached to P at time ``t`` [s] with the platform centre P at ``position`` [m] (world)
+        [kg]; the plant calls it at the start of every step, in time order.
+
+        Timed payloads: attached on ``[attach_time, min(release_time, attach_time + hold_time))`` (a pure function
+        of t). Pick-up payloads (``pickup_position`` set): the first call with ``attach_time <= t <
+        release_time`` and P within ``pickup_radius`` of ``pickup_position`` attaches it (``pickup_times``); it
+        stays until ``release_time`` or ``hold_time`` after the pick-up and never attaches again. ``position``
+        None: no pick-up can happen at this call. Transitions are appended to :attr:`payload_changes`."""
+        total = 0.0
+        for k, p in enumerate(self._payloads):
+            if p.pickup is None:
+                start = p.attach_time
+            else:
+                start = self.pickup_times[k]
+                if start != start and position is not None and p.attach_time <= t < p.release_time:
+                    dx, dy, dz = position[0] - p.pickup[0], position[1] - p.pickup[1], position[2] - p.pickup[2]
+                    if dx * dx + dy * dy + dz * dz <= p.radius2:
+                        start = self.pickup_times[k] = t
+            attached = start <= t < p.release_time and t < start + p.hold_time  # False while start is NaN
+            if attached != self._attached[k]:
+                self._attached[k] = attached
+                distance = math.nan
+                if attached and p.pickup is not None:
+                    distance = math.dist(position, p.pickup)
+                self.payload_changes.append(PayloadChange(float(t), k, attached, p.mass, p.pickup is not None,
+                                                          distance))
+            if attached:
+                total += p.mass
+        return total
 
     def wind_velocity(self, t: float) -> np.ndarray:
         """Air velocity [m/s] (world) at time t: constant + half-sine gusts."""

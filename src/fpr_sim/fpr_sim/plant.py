@@ -431,7 +431,9 @@ class Plant:
             else:
                 fleet.control(self.command, landed=self.uav_landed())
             self._next_control += fleet.controller_period
-        payload = env.payload_mass(self.time)
+        # payloads (timed, or picked up when P is near: the state at the step's start), then the mass matrix basis
+        # both kernels use
+        payload = env.payload_mass(self.time, self._x_list[0:3]) if self.scenario.payloads else 0.0
         if payload != self.structure.payload_mass:
             self.structure.set_payload_mass(payload)
         self._air_list = self._air_velocities() if env.has_wind else None

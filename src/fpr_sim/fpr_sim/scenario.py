@@ -10,9 +10,12 @@ Example (see ``config/scenarios/*.yaml``)::
     initial_state: {mode: ground, leg_angles: 1.047}
     plant: {platform_mass: 0.27}          # true parameters: overrides of thesis Table B.1
     payloads: [{mass: 0.3, attach_time: 10.0, release_time: 20.0}]
+    # or picked up where P passes within 15 cm of a hanging load, after t = 5 s, dropped 10 s later (thesis §4.4.2):
+    # payloads: [{mass: 0.4, attach_time: 5.0, pickup_position: [0.5, 0.0, 1.6], pickup_radius: 0.15, hold_time: 10.0}]
     wind: {velocity: [1.0, 0.0, 0.0]}
     # or a wind generator: 26 km/h mean at the quadrotors' hover centroid, fan 3 m upstream (thesis Exp. III)
     # wind: {fan: {enabled: true, speed: 7.22, direction: [1.0, 0.0, 0.0]}}
+    # switched on at t = 20 s, spinning up over 3 s: {fan: {enabled: true, start_time: 20.0, ramp_time: 3.0}}
     board: {enabled: true, point: [0.0, 0.0, 1.85], size: [0.3, 0.3]}   # a 30 x 30 cm board
     target: {enabled: true, position: [0.05, 0.0, 1.85], yaw: 0.3}       # /fpr/target (thesis §4.4.2)
     joint_stops: {lower: 0.1745, upper: 1.606}   # the legs' mechanical stops [rad] (default on; enabled: false)
@@ -204,11 +207,32 @@ class JointStopConfig:
 
 @dataclass
 class PayloadEvent:
-    """A point mass attached to the platform centre P between ``attach_time`` and ``release_time`` [s]."""
+    """A point mass attached to the platform centre P (scheduled by :class:`fpr_sim.environment.Environment`).
 
-    mass: float = 0.3  #: [kg]
-    attach_time: float = 0.0
-    release_time: float = math.inf
+    Timed (``pickup_position`` null, the default): attached from ``attach_time`` until ``release_time`` [s].
+
+    Pick-up by proximity (thesis §4.4.2 Scenario I, l.6878-6997: the operator flies the platform to a tennis ball
+    hanging in the air with a load suspended below it, about 400 g in all, l.6882-6883; the ball enters the hole at
+    the platform centre and the load is lifted; the tennis-ball tasks of Table 4.3, l.6699-6712, likewise): after
+    ``attach_time`` the payload attaches the first time the platform centre P comes within ``pickup_radius`` of
+    ``pickup_position`` (before ``release_time``), and only once; it is released at ``release_time`` or, when
+    ``hold_time`` > 0, ``hold_time`` after it attached, whichever comes first. The attachment is instantaneous, as
+    for a timed payload: the mass at P steps, the platform velocity is kept (the thesis gives no pick-up
+    dynamics). A timed payload with ``hold_time`` > 0 is released at ``min(release_time, attach_time +
+    hold_time)``. The attached mass is in the ground truth (``payload_mass``) from the step it attaches.
+    """
+
+    mass: float = 0.3  #: [kg] (thesis Sc. I ball + load ≈ 0.4, l.6882-6883)
+    attach_time: float = 0.0  #: [s] timed: attach at; pick-up: the earliest time it can be picked up
+    release_time: float = math.inf  #: [s] released at (at the latest)
+    #: [m] world point the payload hangs at (the tennis ball's centre); null: timed payload (attach at attach_time)
+    pickup_position: list[float] | None = None
+    #: [m] P within this distance of ``pickup_position`` picks it up. 0.15: the thesis's success criterion of the
+    #: pick-up tasks, "the distance from the target's centre to the attached load (≈ 15 cm)" (l.6993-6994)
+    pickup_radius: float = 0.15
+    #: [s] > 0: released this long after it attached (if before ``release_time``); 0: held until ``release_time``
+    #: (not in the thesis: its tasks lasted 45 s each, some loads were released before the end, l.6975-6997)
+    hold_time: float = 0.0
 
 
 @dataclass
@@ -239,6 +263,12 @@ class FanConfig:
     Turbulence: ``turbulence_intensity`` · U(x, r) · ξ(t), ξ a unit-variance first-order Gauss-Markov process on
     each world axis with time constant ``turbulence_time_constant`` (a first-order / Dryden-longitudinal-like
     spectrum), the same ξ for all of the robot's points, deterministic with the scenario seed.
+
+    Schedule: both the mean velocity and the turbulence are multiplied by s(t) = 0 before ``start_time`` and from
+    ``end_time`` on, ``min(1, (t − start_time) / ramp_time)`` in between (1 with ``ramp_time`` = 0), so the
+    turbulence always scales with the local mean speed and vanishes while the fan is off. ``speed`` is the
+    full-speed value (s = 1). With a ground start, give ``reference_point`` (e.g. the quadrotors' hover centroid):
+    the default is the quadrotors' centroid in the initial state, on the ground then.
     """
 
     enabled: bool = False
@@ -261,6 +291,15 @@ class FanConfig:
     turbulence_time_constant: float = 0.1
     decay_constant: float = 5.8  #: B of U_c/U_0 = B·D/x [-] (round jet, Hussein et al. 1994; Pope 2000 Table 5.1)
     spreading_rate: float = 0.094  #: S = db/dx of the velocity half-width [-] (round jet, same sources)
+    #: [s] the fan switches on (before: still air from the fan, no turbulence either); default 0 (on from the start).
+    #: Not in the thesis; lets an experiment take off in still air and start the fan once hovering (Exp. III:
+    #: the robot hovers in front of the wind generator, l.5245-5251)
+    start_time: float = 0.0
+    #: [s] spin-up: the mean speed (and with it the turbulence) ramps linearly from 0 at ``start_time`` to full at
+    #: ``start_time + ramp_time``; default 0: a step (not in the thesis)
+    ramp_time: float = 0.0
+    #: [s] the fan stops (a step to still air); default inf: never (not in the thesis)
+    end_time: float = math.inf
 
 
 @dataclass
@@ -457,6 +496,8 @@ def scenario_from_dict(data: dict | None) -> Scenario:
         raise ValueError(f"board.normal: expected a non-zero 3-vector, got {scenario.board.normal}")
     _validate_board(scenario.board, normal)
     _validate_fan(scenario.wind.fan)
+    for k, payload in enumerate(scenario.payloads):
+        _validate_payload(payload, f"payloads[{k}]")
     target = scenario.target
     if not (len(target.position) == 3 and np.isfinite(target.position).all() and math.isfinite(target.yaw)):
         raise ValueError(f"target: position needs 3 finite values and yaw a finite angle, got {target}")
@@ -502,10 +543,23 @@ def _validate_fan(fan: FanConfig) -> None:
         value = getattr(fan, name)
         if not (value > 0.0 and math.isfinite(value)):
             raise ValueError(f"wind.fan.{name}: must be finite and > 0, got {value}")
-    for name in ("speed", "turbulence_intensity"):
+    for name in ("speed", "turbulence_intensity", "start_time", "ramp_time"):
         value = getattr(fan, name)
         if not (value >= 0.0 and math.isfinite(value)):
             raise ValueError(f"wind.fan.{name}: must be finite and >= 0, got {value}")
+    if not fan.end_time > fan.start_time:
+        raise ValueError(f"wind.fan.end_time ({fan.end_time} s) must be after start_time ({fan.start_time} s)")
+
+
+def _validate_payload(payload: PayloadEvent, name: str) -> None:
+    if not (payload.mass >= 0.0 and math.isfinite(payload.mass)):
+        raise ValueError(f"{name}.mass: must be finite and >= 0 [kg], got {payload.mass}")
+    if not payload.hold_time >= 0.0:
+        raise ValueError(f"{name}.hold_time: must be >= 0 [s] (0: held until release_time), got {payload.hold_time}")
+    if payload.pickup_position is not None:
+        _vector3(payload.pickup_position, f"{name}.pickup_position")
+    if not (payload.pickup_radius > 0.0 and math.isfinite(payload.pickup_radius)):
+        raise ValueError(f"{name}.pickup_radius: must be finite and > 0 [m], got {payload.pickup_radius}")
 
 
 def load_scenario(path: str | None) -> Scenario:

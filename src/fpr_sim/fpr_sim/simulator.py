@@ -100,6 +100,7 @@ class SimulatorNode(Node):
         self._next_truth = 0.0
         self._next_camera = 0.0
         self._last_timeouts = 0
+        self._payload_changes_logged = 0
         self._wall_start: float | None = None
         self._sim_start = 0.0
         self.get_logger().info(
@@ -145,6 +146,10 @@ class SimulatorNode(Node):
         if self.target is not None and t + 1e-9 >= self._next_target:
             self._next_target += self.target_period
             self.target_pub.publish(self._target_message(t))
+        changes = self.sim.plant.environment.payload_changes
+        if len(changes) > self._payload_changes_logged:
+            self._log_payload_changes(changes[self._payload_changes_logged:])
+            self._payload_changes_logged = len(changes)
         if self.sim.lockstep_timeouts != self._last_timeouts:
             self._last_timeouts = self.sim.lockstep_timeouts
             self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
@@ -159,6 +164,17 @@ class SimulatorNode(Node):
                                    f"arrival: {1000.0 * self.sim.setpoint_latency_max():.0f} ms)")
             return False
         return True
+
+    def _log_payload_changes(self, changes) -> None:
+        """One INFO line per payload attached (picked up) or released (fpr_sim.environment.PayloadChange)."""
+        for change in changes:
+            what = f"payload {change.index} ({change.mass:.3f} kg)"
+            if change.attached and change.pickup:
+                self.get_logger().info(f"{what} picked up at t = {change.time:.3f} s (P {change.distance:.3f} m "
+                                       "from its pickup_position)")
+            else:
+                self.get_logger().info(f"{what} {'attached' if change.attached else 'released'} at "
+                                       f"t = {change.time:.3f} s")
 
     def _truth_message(self) -> FprState:
         truth = self.sim.ground_truth()

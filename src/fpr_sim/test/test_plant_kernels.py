@@ -307,6 +307,11 @@ _STEP_SCENARIOS = {
                              "payloads": [{"mass": 0.2, "attach_time": 0.01, "release_time": 0.08}],
                              "external_wrenches": [{"start": 0.0, "end": 0.05, "force": [0.3, 0.0, -0.5],
                                                     "moment": [0.0, 0.01, 0.0]}]},
+    "pickup_payload_fan_schedule": {
+        "initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
+        "payloads": [{"mass": 0.3, "attach_time": 0.02, "pickup_position": [0.0, 0.0, 1.5], "pickup_radius": 0.2,
+                      "hold_time": 0.05}],
+        "wind": {"fan": {"enabled": True, "speed": 5.0, "start_time": 0.03, "ramp_time": 0.05, "end_time": 0.12}}},
     "board_contact": {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
                       "board": {"enabled": True, "point": [0.0, 0.0, 1.5], "normal": [0.1, 0.0, -1.0]}},
     "fan_turbulent_finite_board": {

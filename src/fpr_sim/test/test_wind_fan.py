@@ -181,3 +181,75 @@ def test_truth_wrench_follows_the_turbulence_and_the_seed():
         forces.append(np.array(series))
     assert np.array_equal(forces[0], forces[1]) and not np.allclose(forces[0], forces[2])
     assert forces[0].std() > 0.05  # turbulence visible in the reported wrench
+
+
+def test_fan_schedule_switches_on_ramps_and_stops():
+    """start_time / ramp_time / end_time: still air (no turbulence either) before the start and after the end, the
+    mean speed ramping linearly from 0 in between; once on, the same seeded turbulence as an always-on fan."""
+    point = [3.0, 0.0, 1.0]
+    quiet = FanJet(_fan(turbulence_intensity=0.0, start_time=1.0, ramp_time=2.0, end_time=5.0), seed=2, dt=1e-3,
+                   reference_point=[0.0, 0.0, 0.0])
+    full = 26.0 * KMH
+    for t, fraction in ((0.0, 0.0), (0.999, 0.0), (1.0, 0.0), (1.5, 0.25), (2.0, 0.5), (3.0, 1.0), (4.999, 1.0),
+                        (5.0, 0.0), (9.0, 0.0)):
+        assert quiet.speed_factor(t) == pytest.approx(fraction)
+        assert quiet.velocities(t, [point])[0] == pytest.approx((fraction * full, 0.0, 0.0))
+        assert quiet.mean_speed(point, t) == pytest.approx(fraction * full)
+    assert quiet.mean_speed(point) == pytest.approx(full)  # the steady (full-speed) profile
+    # turbulent: zero while off; on, the always-on fan's sequence times s(t) (a pure function of seed and step)
+    scheduled = FanJet(_fan(start_time=1.0, ramp_time=2.0, end_time=5.0), seed=4, dt=1e-3,
+                       reference_point=[0.0, 0.0, 0.0])
+    always = FanJet(_fan(), seed=4, dt=1e-3, reference_point=[0.0, 0.0, 0.0])
+    for k in range(0, 6000, 7):
+        t = k * 1e-3
+        got = np.array(scheduled.velocities(t, [point])[0])
+        reference = np.array(always.velocities(t, [point])[0])
+        assert np.allclose(got, scheduled.speed_factor(t) * reference, rtol=1e-12, atol=1e-12), t
+        if not 1.0 < t < 5.0:
+            assert np.all(got == 0.0)
+    # during a (slow) ramp the fluctuation is I·s(t)·U (s from 1/4 to 1/2 over these 400 s)
+    ramp = FanJet(_fan(ramp_time=1600.0), seed=8, dt=0.01, reference_point=[0.0, 0.0, 0.0])
+    times = 400.0 + 0.01 * np.arange(40_000)
+    samples = np.array([ramp.velocities(t, [point])[0] for t in times.tolist()]) / (times / 1600.0)[:, None]
+    assert samples[:, 1].std() == pytest.approx(0.15 * full, rel=0.08)
+    assert samples[:, 0].mean() == pytest.approx(full, rel=0.02)
+
+
+def test_fan_schedule_keys_are_validated():
+    fan = scenario_from_dict({"wind": {"fan": {"enabled": True}}}).wind.fan
+    assert (fan.start_time, fan.ramp_time, fan.end_time) == (0.0, 0.0, math.inf)
+    for bad, match in (({"start_time": -1.0}, "start_time"), ({"ramp_time": -0.5}, "ramp_time"),
+                       ({"start_time": 5.0, "end_time": 5.0}, "end_time"), ({"ramp_time": ".inf"}, "ramp_time"),
+                       ({"start": 1.0}, r"unknown key\(s\) \['start'\]")):
+        with pytest.raises(ValueError, match=match):
+            scenario_from_dict({"wind": {"fan": {"enabled": True} | bad}})
+
+
+@pytest.mark.parametrize("kernel", ["python", "compiled"])
+def test_fan_switched_on_while_hovering(kernel):
+    """A hover in still air, the fan switched on at 0.1 s with a 0.1 s spin-up: no wind force before, the true
+    wrench growing over the ramp to the always-on value, the robot pushed along +x only after the start."""
+    from fpr_sim._kernels import kernel_status
+
+    if kernel == "compiled" and not kernel_status().available:
+        pytest.skip(kernel_status().reason)
+    plant = _hover_plant({"speed": 13.0 * KMH, "turbulence_intensity": 0.0, "start_time": 0.1, "ramp_time": 0.1},
+                         kernel=kernel)
+    steady = _hover_plant({"speed": 13.0 * KMH, "turbulence_intensity": 0.0}).external_wrench()[0]
+    from fpr_model.dynamics import gravity, thrusts_from_wrench
+    from fpr_sim.quadrotor import AttitudeCommand
+
+    q = plant.state.configuration()
+    thrusts = thrusts_from_wrench(plant.params, q, gravity(plant.params, q))
+    plant.ideal_attitude = True
+    plant.set_command(AttitudeCommand(plant.default_uav_attitudes(thrusts),
+                                      np.linalg.norm(thrusts, axis=1) / plant.fleet.max_thrust(),
+                                      np.ones(plant.n, dtype=bool)))
+    force, velocity = [], []
+    for _ in range(300):
+        plant.step()
+        force.append(plant.external_wrench()[0])
+        velocity.append(plant.state.velocity[0])
+    assert max(abs(f) for f in force[:99]) < 1e-6 and max(abs(v) for v in velocity[:99]) < 1e-6  # still air
+    assert force[149] == pytest.approx(0.5 * steady, rel=0.05)  # t = 0.15 s: half way up the ramp
+    assert force[299] == pytest.approx(steady, rel=0.05) and velocity[299] > 100.0 * max(abs(v) for v in velocity[:99])
