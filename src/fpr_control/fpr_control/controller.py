@@ -6,7 +6,10 @@ Every UAV runs the same computation for the whole robot and applies its own shar
   "Centralized" gains, desired pose integrated from the teleoperation velocities.
 - ``communicating`` (C): own LocalState + the others' ζ_j, PID (4.27)-(4.29) in F_Fp.
 - ``non_communicating`` (NC): the others' states replaced by desired values (4.32).
-- ``impedance``: impedance law (4.33)-(4.34) with a momentum observer (4.35)-(4.37).
+- ``impedance``: impedance law (4.33)-(4.34) with a momentum observer (4.35)-(4.37). Decentralized (no position),
+  the estimated platform force enters ε_τ (3.26) only along the desired interaction force
+  (``impedance_force_input = "interaction"``, :func:`fpr_control.laws.interaction_force_selection`), so a load
+  is compensated rather than turned into a steady sink f_e / B^d; ``"full"`` keeps the printed (4.34).
 - ``pd``, ``pd_compensated``: the Table 3.4 comparison laws (PD, PD + feed-forward −τ̂_e).
 
 ``state_source = "ground_truth"`` runs impedance / pd / pd_compensated on the ground truth in F0 with the full
@@ -46,6 +49,7 @@ from fpr_control.laws import (
     configuration_error,
     control_wrench,
     impedance_acceleration,
+    interaction_force_selection,
     observer_inputs,
     pd_acceleration,
     pid_gains_from_groups,
@@ -67,6 +71,10 @@ from fpr_control.setpoints import (
 MODES = ("centralized", "communicating", "non_communicating", "impedance", "pd", "pd_compensated")
 MODE_CODES = {name: code for code, name in enumerate(MODES)}  # = fpr_msgs/ControllerStatus MODE_*
 STATE_SOURCES = ("local", "ground_truth")
+#: What of the estimated platform force enters the decentralized impedance (4.34) as ε_τ (3.26):
+#: "interaction" only its component along the desired interaction force (fpr_control.laws.interaction_force_selection),
+#: "full" all of it (the printed law: a load then drifts the robot at f_e / B^d_p). Ground truth: always (3.26).
+IMPEDANCE_FORCE_INPUTS = ("interaction", "full")
 #: TeleopCommand.MODE_FLY: integrators run and the centralized reference is free only while flying.
 TELEOP_MODE_FLY = 2
 _NEEDS_PEERS = ("communicating", "impedance", "pd", "pd_compensated")
@@ -135,6 +143,7 @@ class ControllerConfig:
     max_thrust: float = 25.0  # f_max [N]
     max_tilt: float = math.radians(35.0)  # [rad] from the vertical of the controller frame
     require_own_echo: bool = True  # the own ζ_i must come back on the shared topic (else fallback)
+    impedance_force_input: str = "interaction"  # one of IMPEDANCE_FORCE_INPUTS (decentralized impedance only)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -143,6 +152,9 @@ class ControllerConfig:
             raise ValueError(f"observer must be one of {OBSERVER_KINDS}, got {self.observer!r}")
         if self.state_source not in STATE_SOURCES:
             raise ValueError(f"state_source must be one of {STATE_SOURCES}, got {self.state_source!r}")
+        if self.impedance_force_input not in IMPEDANCE_FORCE_INPUTS:
+            raise ValueError(f"impedance_force_input must be one of {IMPEDANCE_FORCE_INPUTS}, "
+                             f"got {self.impedance_force_input!r}")
         if not (self.period > 0.0 and self.info_timeout > 0.0 and self.max_thrust > 0.0
                 and 0.0 < self.max_tilt < 0.5 * math.pi):
             raise ValueError("period, info_timeout, max_thrust must be > 0 and max_tilt in (0, pi/2)")
@@ -393,8 +405,11 @@ class Controller:
 
     def _law(self, active: str, terms, error, nu, desired: DesiredTrajectory, tau_hat, flying) -> np.ndarray:
         if active == "impedance":
+            selection = None  # (3.26) in every row: Ch. 3 setting (with the position stiffness) or "full"
+            if not self.uses_ground_truth and self.config.impedance_force_input == "interaction":
+                selection = interaction_force_selection(desired.wrench[:3])  # no position: see its doc
             u = impedance_acceleration(self.impedance_gains, error, nu, desired.nu, desired.nu_dot,
-                                       wrench_tracking_error(tau_hat, desired.wrench))
+                                       wrench_tracking_error(tau_hat, desired.wrench, selection))
             return control_wrench(terms, u, nu, tau_hat)  # (3.31) / (4.33)
         if active in ("pd", "pd_compensated"):
             u = pd_acceleration(self.pid.gains, error, nu, desired.nu, desired.nu_dot)

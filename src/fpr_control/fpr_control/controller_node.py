@@ -61,6 +61,10 @@ class ControllerNode(Node):
         info_timeout = d("info_timeout", 0.2, describe("[s] a peer's zeta older than this -> fallback to NC")).value
         max_thrust = d("max_thrust", 25.0, describe("f_max [N]: thrust saturation")).value
         max_tilt_deg = d("max_tilt_deg", 35.0, describe("[deg] tilt limit of the thrust direction")).value
+        force_input = d("impedance_force_input", "interaction", describe(
+            "decentralized impedance: estimated platform force entering (4.34) as epsilon_tau: 'interaction' (along "
+            "the desired contact force only; a load is compensated) or 'full' (the printed law: a load drifts the "
+            "robot at f_e / B^d)")).value
         self.local_timeout = d("local_state_timeout", 0.5, describe("[s] LocalState older -> invalid")).value
         self.imu_timeout = d("imu_timeout", 0.5, describe("[s] IMU older -> yaw from LocalState.uav_yaw")).value
         self.teleop_timeout = d("teleop_timeout", 1.0, describe(
@@ -79,7 +83,7 @@ class ControllerNode(Node):
         self.config = ControllerConfig(
             uav_id=int(uav_id), mode=mode, gains=gains_from_dict(gains, int(n)), observer=observer,
             state_source=state_source, period=1.0 / rate, info_timeout=info_timeout, max_thrust=max_thrust,
-            max_tilt=math.radians(max_tilt_deg))
+            max_tilt=math.radians(max_tilt_deg), impedance_force_input=force_input)
         self.controller = Controller(params, self.config)
         self.n = int(n)
 
@@ -106,7 +110,8 @@ class ControllerNode(Node):
         self.create_timer(self.config.period, self._on_tick)
         self.get_logger().info(
             f"controller uav {uav_id}/{n}: mode {mode}, observer {observer}, state {state_source}, "
-            f"{rate:.0f} Hz, info_timeout {info_timeout} s, f_max {max_thrust} N, tilt {max_tilt_deg} deg")
+            f"{rate:.0f} Hz, info_timeout {info_timeout} s, f_max {max_thrust} N, tilt {max_tilt_deg} deg"
+            + (f", impedance force input {force_input}" if mode == "impedance" else ""))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

@@ -92,9 +92,40 @@ def configuration_error(q: np.ndarray, q_d: np.ndarray, use_position: bool = Tru
     return error
 
 
-def wrench_tracking_error(tau_hat: np.ndarray, tau_desired: np.ndarray) -> np.ndarray:
-    """ε_τ = −τ̂_e − τ^d_e (3.26): estimated wrench exerted on the environment minus the desired one."""
-    return -np.asarray(tau_hat) - np.asarray(tau_desired)
+def wrench_tracking_error(tau_hat: np.ndarray, tau_desired: np.ndarray,
+                          force_selection: np.ndarray | None = None) -> np.ndarray:
+    """ε_τ = −τ̂_e − τ^d_e (3.26): estimated wrench exerted on the environment minus the desired one
+    (layout of τ̂_e: platform force [N] in the controller frame, moments [N·m]).
+
+    ``force_selection`` S (3×3, controller frame), when given, replaces the platform-force rows by
+    ``−S f̂_p,e − f^d_p,e``: only the selected part of the estimated force is an input of the impedance (4.34); the
+    rest is left to the compensation −τ̂_e of (4.33) (see :func:`interaction_force_selection`). None: (3.26)."""
+    error = -np.asarray(tau_hat, dtype=float) - np.asarray(tau_desired, dtype=float)
+    if force_selection is not None:
+        error[:3] = -np.asarray(force_selection, dtype=float) @ np.asarray(tau_hat[:3], dtype=float) \
+            - np.asarray(tau_desired[:3], dtype=float)
+    return error
+
+
+def interaction_force_selection(desired_force: np.ndarray) -> np.ndarray:
+    """S = d dᵀ with d = f^d_p,e / ‖f^d_p,e‖ the direction of the desired interaction force (3.43)-(3.44)
+    (controller frame); 0 (3×3) when no interaction force is desired. [OURS, decentralized controller.]
+
+    Why: without a position measurement the position rows of (4.34) have no stiffness (Table 4.5 "*", (4.29)
+    ε_q,p = 0), so (4.33)-(4.34) with ε_τ of (3.26) close the loop ``M^d (ν̇ − ν̇^d) + B^d (ν − ν^d) = τ̂_e + τ^d_e``
+    on those rows: a persistent force f_e (a load) is not a compliance offset f_e/K^d as in Ch. 3 but a steady
+    velocity error f_e/B^d (−0.29 m/s for 300 g with B^d = 10, −0.39 m/s for the 400 g of §4.4.2, more than the
+    operator's stick), i.e. the robot descends onto its quadrotors. With S the estimate enters the translational
+    impedance only along the force the operator asks the robot to exert (Scenario II: the normal contact force
+    still tracks f^d_c, since along d the law is (4.34) unchanged); across d, and everywhere when f^d = 0
+    (Scenario I, free flight with a load), the −τ̂_e of (4.33) compensates it and the operator's velocity
+    command is tracked. The orientation and leg rows (with stiffness) keep (3.26)."""
+    f = np.asarray(desired_force, dtype=float)
+    norm = float(np.linalg.norm(f))
+    if not norm > 0.0:
+        return np.zeros((3, 3))
+    d = f / norm
+    return np.outer(d, d)
 
 
 def impedance_acceleration(gains: ImpedanceGains, config_error: np.ndarray, nu: np.ndarray, nu_d: np.ndarray,

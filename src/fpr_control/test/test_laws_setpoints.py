@@ -15,6 +15,7 @@ from fpr_control.laws import (
     configuration_error,
     control_wrench,
     impedance_acceleration,
+    interaction_force_selection,
     wrench_tracking_error,
 )
 from fpr_control.reference import CentralizedReference, TeleopReference, decentralized_reference
@@ -75,6 +76,22 @@ def test_perfect_estimate_gives_the_desired_impedance():
         residual = (gains.inertia * (nu_dot_d - nu_dot) + gains.damping * (nu_d - nu)
                     + gains.stiffness * error - eps_tau)
         assert np.abs(residual).max() < 1e-8
+
+
+def test_interaction_force_selection():
+    """S = d dᵀ along the desired interaction force, 0 without one; ε_τ keeps (3.26) outside the force rows and
+    along d, and drops the estimated force across d (decentralized position rows)."""
+    assert np.array_equal(interaction_force_selection(np.zeros(3)), np.zeros((3, 3)))
+    normal = quat_to_rotmat(euler_zyx_to_quat(0.2, -0.1, 0.0))[:, 2]
+    S = interaction_force_selection(5.0 * normal)
+    assert np.allclose(S, np.outer(normal, normal)) and np.allclose(S @ S, S)
+    tau_hat, tau_d = RNG.normal(size=9), np.concatenate([5.0 * normal, np.zeros(6)])
+    assert np.array_equal(wrench_tracking_error(tau_hat, tau_d), -tau_hat - tau_d)  # (3.26)
+    eps = wrench_tracking_error(tau_hat, tau_d, S)
+    assert np.allclose(eps[3:], -tau_hat[3:])
+    assert np.allclose(eps[:3], -normal * (normal @ tau_hat[:3] + 5.0))  # contact force error along the normal
+    free = wrench_tracking_error(tau_hat, np.zeros(9), interaction_force_selection(np.zeros(3)))
+    assert np.allclose(free[:3], 0.0) and np.allclose(free[3:], -tau_hat[3:])
 
 
 def test_damping_ratios_of_the_tables():
