@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Set the workspace up if needed, then run the main job under the network isolation of DESIGN.md §6:
-# the simulated-swarm demo (demo/run_demo.py: the whole node graph flies a scripted mission and writes
-# metrics.json, PNG plots and an MCAP log to reports/demo/). Extra arguments go to the demo, e.g.
+# Set the workspace up if needed, then run the main job under the network isolation of DESIGN.md §6: the demo
+# experiment of fpr_experiments, `takeoff_landing` (the whole node graph takes off from the ground, flies a roll
+# step and lands; progress lines, a summary table, and metrics.json, PNG plots and flight.mcap in
+# reports/takeoff_landing/). Extra arguments go to `ros2 run fpr_experiments run takeoff_landing`, e.g.
 #   bash scripts/run_demo.sh --quick
-#   bash scripts/run_demo.sh --mode non_communicating --output-dir reports/demo_nc
-#   bash scripts/run_demo.sh --help
+#   bash scripts/run_demo.sh --cameras images --output-dir reports/demo_images
+#   bash scripts/run_demo.sh --processes          # one process per UAV / ground station / simulator
 # `bash scripts/run_demo.sh --selfcheck` runs the model self-check instead (ros2 run fpr_model selfcheck).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -14,4 +15,4 @@ if [[ "${1:-}" == "--selfcheck" ]]; then
   shift
   exec bash "$ROOT/scripts/isolated.sh" ros2 run fpr_model selfcheck "$@"
 fi
-exec bash "$ROOT/scripts/isolated.sh" python "$ROOT/demo/run_demo.py" "$@"
+exec bash "$ROOT/scripts/isolated.sh" ros2 run fpr_experiments run takeoff_landing "$@"

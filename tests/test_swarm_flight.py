@@ -1,33 +1,31 @@
 """Launch-free integration (DESIGN.md §7): the whole simulated swarm in ONE process flies a scripted mission.
 
-simulator (lockstep, emulated cameras) + 3 × (px4_bridge, pose_estimator, controller in mode C) + teleop +
-joy_script playing config/joy_scripts/integration_flight.yaml: arm on the ground, fly, take off and climb 4 s at
-0.3 m/s, hold, roll +10°, hold, roll back, hold, descend 4 s at 0.3 m/s, land. The flight runs once (module
-fixture, ~31 s simulated); each test asserts flight METRICS from the ground truth against the commanded χ_d (the
-TeleopCommand the controllers received), never sleeps. Start scenario: config/scenarios/ground_start.yaml
-(resting on the ground, legs 60°, disarmed); the script first raises teleop's common leg angle from its 45°
-default to 60°.
+The graph is fpr_experiments' description of the ``takeoff_landing`` experiment (the demo), built and stepped by
+its in-process runner: simulator (lockstep, emulated cameras) + 3 × (px4_bridge, pose_estimator, controller in mode
+C) + teleop + joy_script playing fpr_control's joy_scripts/integration_flight.yaml: arm on the ground, fly, take
+off and climb 4 s at 0.3 m/s, hold, roll +10°, hold, roll back, hold, descend 4 s at 0.3 m/s, land. The flight
+runs once (module fixture, ~31 s simulated); each test asserts flight METRICS from the ground truth against the
+commanded χ_d (the TeleopCommand the controllers received), never sleeps. Start scenario: fpr_sim's
+ground_start.yaml (resting on the ground, legs 60°, disarmed).
 """
 
 from __future__ import annotations
 
 import math
-import os
-import sys
 import time
 
 import numpy as np
 import pytest
+from fpr_experiments.catalog import load_experiment
+from fpr_experiments.graph import describe_graph
+from fpr_experiments.inprocess import InProcessGraph
+from fpr_experiments.recording import flight_record, recorded_topics
+from fpr_experiments.resources import SCENARIOS
+from fpr_experiments.runner import graph_options
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from swarm_graph import SwarmGraph, SwarmOptions  # noqa: E402
-
-SCENARIO = "ground_start.yaml"  # resting on the ground, legs 60°, disarmed (hover.yaml: start in the air)
-JOY_SCRIPT = os.path.join(os.path.dirname(HERE), "src", "fpr_control", "config", "joy_scripts",
-                          "integration_flight.yaml")
+EXPERIMENT = "takeoff_landing"
 # Script times [s] (the timeline starts at the joy_script's first tick, ~0.02 s of simulation)
-LEGS_DEG = 60.0             # RB held 0-1.5 s: teleop's common leg angle 45° -> 60° (the resting robot's)
+LEGS_DEG = 60.0             # the teleop's leg command follows the resting robot's legs (initial_legs_from_info)
 CLIMB = (6.0, 10.0)         # left stick up: +0.3 m/s
 ROLL_UP = (12.0, 14.0)      # d-pad: +5°/s
 ROLL_DOWN = (17.0, 19.0)    # d-pad: −5°/s
@@ -53,26 +51,39 @@ def _window(arrays, start, end):
     return mask
 
 
+def _local_state_ages(recording, n: int) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per UAV: the control instants (diagnostics stamps) [s] and, at each, the age [s] of the newest local_state
+    stamped at or before it, i.e. how old the controller's estimate is at best (NaN: none yet)."""
+    ages = {}
+    for i in range(1, n + 1):
+        t_d = np.array([_stamp(m) for m in recording.get(f"/fpr/uav{i}/diagnostics")])
+        stamps = np.array(sorted(_stamp(m) for m in recording.get(f"/fpr/uav{i}/local_state")))
+        k = np.searchsorted(stamps, t_d + 1e-9) - 1
+        ages[i] = (t_d, np.where(k >= 0, t_d - stamps[np.maximum(k, 0)], np.nan) if len(stamps) else
+                   np.full(len(t_d), np.nan))
+    return ages
+
+
 @pytest.fixture(scope="module")
 def flight():
     wall_start = time.monotonic()
-    options = SwarmOptions(scenario=SCENARIO, joy_script=JOY_SCRIPT, controller_mode="communicating",
-                           emulated_cameras=True, real_time_factor=0.0)
-    with SwarmGraph(options) as swarm:
+    experiment = load_experiment(EXPERIMENT)
+    variant = experiment.variants[0]
+    options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3)
+    specs = describe_graph(options)
+    with InProcessGraph(specs, recorded_topics(3)) as swarm:
         swarm.wait_for_discovery()
         print(f"\n[swarm] {len(swarm.nodes)} nodes built and discovered in {time.monotonic() - wall_start:.1f} s",
               flush=True)
         stats = {"land_timeouts": None}
 
         def progress() -> None:
-            truth = swarm.recorder.truth_arrays()
-            states = [s.state if s is not None else -1 for s in swarm.recorder.latest_status().values()]
-            if len(truth["t"]):
-                z, (roll, pitch, _) = truth["position"][-1, 2], np.degrees(truth["rpy"][-1])
-                legs = np.round(np.degrees(truth["legs"][-1]), 1).tolist()
-                print(f"[swarm] t={swarm.sim_time:5.1f} s  wall={time.monotonic() - wall_start:5.1f} s  z={z:.3f} m  "
-                      f"roll={roll:5.1f} pitch={pitch:5.1f} deg  legs={legs} deg  bridge states={states}  "
-                      f"lockstep timeouts={swarm.lockstep_timeouts}", flush=True)
+            truth = swarm.recorder.latest("/fpr/ground_truth")
+            if truth is not None:
+                p = truth.platform_pose.position
+                legs = [round(math.degrees(a), 1) for a in truth.leg_angles]
+                print(f"[swarm] t={swarm.sim_time:5.1f} s  wall={time.monotonic() - wall_start:5.1f} s  z={p.z:.3f} m  "
+                      f"legs={legs} deg  lockstep timeouts={swarm.lockstep_timeouts}", flush=True)
 
         run_start, sim_start = time.monotonic(), swarm.sim_time
         swarm.run_until(lambda: swarm.sim_time >= LAND, wall_timeout=240.0, progress=progress)
@@ -81,24 +92,33 @@ def flight():
         wall = time.monotonic() - run_start
         assert swarm.wait_for_recorder(), "the recorder did not catch up with the simulation"
         rtf = (swarm.sim_time - sim_start) / wall
+        simulator = swarm.simulator
         print(f"[swarm] {swarm.sim_time:.1f} s simulated in {wall:.1f} s wall: real-time factor {rtf:.2f}; "
               f"lockstep timeouts {swarm.lockstep_timeouts} ({stats['land_timeouts']} before the land command); "
-              f"oldest setpoint on arrival at PX4 {1000 * swarm.setpoint_latency_max():.0f} ms", flush=True)
-        recorder = swarm.recorder
-        record = {
-            "truth": recorder.truth_arrays(), "teleop": recorder.teleop_arrays(),
-            "status": {i: list(s) for i, s in recorder.status.items()},
-            "diagnostics": {i: list(d) for i, d in recorder.diagnostics.items()},
-            "local_state": {i: list(s) for i, s in recorder.local_state.items()},
-            "setpoints": {i: list(s) for i, s in recorder.setpoints.items()},
-            "n": swarm.n, "errors": list(swarm.errors), "timeouts_before_land": stats["land_timeouts"],
+              f"oldest setpoint on arrival at PX4 {1000 * simulator.sim.setpoint_latency_max():.0f} ms", flush=True)
+        recording = swarm.recorder.snapshot()
+        record = flight_record(recording, 3, experiment=EXPERIMENT, sim_time=swarm.sim_time)
+        truth = record.truth
+        controller = swarm.node("/fpr/uav1/controller")
+        result = {
+            "record": record, "recording": recording, "n": 3,
+            "truth": {"t": truth.t, "position": truth.position, "rpy": truth.rpy, "legs": truth.legs,
+                      "velocity": truth.velocity,
+                      "finite": np.all(np.isfinite(truth.position), axis=1) & np.all(np.isfinite(truth.rpy), axis=1)},
+            "teleop": {"t": record.command.t, "velocity": record.command.velocity, "roll": record.command.roll,
+                       "pitch": record.command.pitch, "legs": record.command.legs},
+            "status": {i: recording.get(f"/fpr/uav{i}/status") for i in (1, 2, 3)},
+            "diagnostics": {i: recording.get(f"/fpr/uav{i}/diagnostics") for i in (1, 2, 3)},
+            "local_state": {i: recording.get(f"/fpr/uav{i}/local_state") for i in (1, 2, 3)},
+            "setpoints": {i: recording.get(f"/fpr/uav{i}/setpoint") for i in (1, 2, 3)},
+            "errors": list(swarm.errors), "timeouts_before_land": stats["land_timeouts"],
             "timeouts": swarm.lockstep_timeouts, "rtf": rtf, "sim_time": swarm.sim_time,
-            "max_thrust": swarm.controllers[0].config.max_thrust,
-            "setpoint_latency": swarm.setpoint_latency_max,  # (start, end) -> [s]
-            "setpoint_latency_counts": [e.setpoint_latency.count for e in swarm.simulator.sim.emulators],
-            "local_state_ages": recorder.local_state_ages(),
+            "max_thrust": controller.config.max_thrust,
+            "setpoint_latency": simulator.sim.setpoint_latency_max,  # (start, end) -> [s]
+            "setpoint_latency_counts": [e.setpoint_latency.count for e in simulator.sim.emulators],
+            "local_state_ages": _local_state_ages(recording, 3),
         }
-    yield record
+    yield result
 
 
 def _stamp(msg) -> float:

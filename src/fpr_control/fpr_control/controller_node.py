@@ -70,6 +70,9 @@ class ControllerNode(Node):
         self.teleop_timeout = d("teleop_timeout", 1.0, describe(
             "[s] no TeleopCommand for this long -> zero velocities, hold the rest")).value
         model_file = d("model_file", "", describe("FprParameters YAML (empty: thesis Table B.1 defaults)")).value
+        info_input_topic = d("info_input_topic", "/fpr/info", describe(
+            "topic the peers' zeta_j are read from (the own zeta_i is always published on /fpr/info); set it to "
+            "a relay's output to inject communication faults (fpr_experiments info_link)")).value
         gains = {}
         for group, values in DEFAULT_GAINS.items():
             gains[group] = {}
@@ -89,7 +92,7 @@ class ControllerNode(Node):
 
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(LocalState, "local_state", self._on_local, best_effort)
-        self.create_subscription(InformationVector, "/fpr/info", self._on_info, QoSProfile(
+        self.create_subscription(InformationVector, info_input_topic, self._on_info, QoSProfile(
             depth=20, reliability=ReliabilityPolicy.BEST_EFFORT))
         self.create_subscription(TeleopCommand, "/fpr/teleop", self._on_teleop, best_effort)
         self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)

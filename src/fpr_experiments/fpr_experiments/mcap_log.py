@@ -1,4 +1,4 @@
-"""ROS 2 MCAP log writer for the demo: files Foxglove and ``ros2 bag`` (rosbag2_storage_mcap) read.
+"""ROS 2 MCAP log writer of the experiment reports: files Foxglove and ``ros2 bag`` (rosbag2_storage_mcap) read.
 
 The MCAP "ros2" profile, as rosbag2 writes it:
 
@@ -114,12 +114,12 @@ class RosMcapWriter:
         self.path = path
         self._stream = open(path, "wb")  # noqa: SIM115 - closed in close()
         self._writer = Writer(self._stream)
-        self._writer.start(profile=Profile.ROS2, library="fpr demo (mcap python)")
+        self._writer.start(profile=Profile.ROS2, library="fpr_experiments (mcap python)")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, type]] = {}
         self.counts: dict[str, int] = {}
         if metadata:
-            self._writer.add_metadata("fpr_demo", {k: str(v) for k, v in metadata.items()})
+            self._writer.add_metadata("fpr_experiment", {k: str(v) for k, v in metadata.items()})
 
     def add_channel(self, topic: str, msg_type: type) -> int:
         """Register ``topic`` carrying ``msg_type`` (a generated message class); returns the channel id."""
@@ -146,6 +146,13 @@ class RosMcapWriter:
         time_ns = stamp_ns(msg) if log_time_ns is None else int(log_time_ns)
         self._writer.add_message(channel_id=channel_id, log_time=time_ns, publish_time=time_ns,
                                  data=serialize_message(msg), sequence=self.counts[topic])
+        self.counts[topic] += 1
+
+    def write_serialized(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """Add an already CDR-serialized message (as a raw subscription delivers it) to a registered ``topic``."""
+        channel_id, _ = self._channels[topic]
+        self._writer.add_message(channel_id=channel_id, log_time=int(log_time_ns), publish_time=int(log_time_ns),
+                                 data=bytes(data), sequence=self.counts[topic])
         self.counts[topic] += 1
 
     def close(self) -> None:

@@ -62,6 +62,11 @@ class SimulatorNode(Node):
             "listens), then replies to whoever talks to it; 0: silent until contacted"))
         p("emulated_cameras", False, descriptor=_desc("publish noisy marker poses instead of images"))
         p("duration", 0.0, descriptor=_desc("stop after this simulated time [s]; 0 = run until shutdown"))
+        p("wait_for_clock_subscribers", 0, descriptor=_desc(
+            "run(): before the first step, wait until /clock has this many subscriptions (every simulated-time node "
+            "of a multi-process graph), so that no process misses the start; 0 = start at once"))
+        p("wait_for_clock_subscribers_timeout", 60.0, descriptor=_desc(
+            "[s] wall: give up waiting for the /clock subscribers and start anyway (with a warning)"))
         get = self.get_parameter
         self.scenario = load_scenario(get("scenario_file").value)
         options = SimulationOptions(physics_rate=float(get("physics_rate").value),
@@ -115,6 +120,7 @@ class SimulatorNode(Node):
         control period: one executor, built once (``rclpy.spin_once`` would build a wait set per call, ~0.2 ms)."""
         executor = SingleThreadedExecutor(context=self.context)
         executor.add_node(self)
+        self._wait_for_clock_subscribers(executor)
         steps_per_spin = max(1, round(1.0 / (self.clock_period * float(self.get_parameter("control_rate").value))))
         try:
             steps = 0
@@ -126,10 +132,23 @@ class SimulatorNode(Node):
             executor.remove_node(self)
             executor.shutdown(timeout_sec=0.0)
 
+    def _wait_for_clock_subscribers(self, executor) -> None:
+        expected = int(self.get_parameter("wait_for_clock_subscribers").value)
+        if expected <= 0:
+            return
+        deadline = time.monotonic() + float(self.get_parameter("wait_for_clock_subscribers_timeout").value)
+        while rclpy.ok(context=self.context) and self.clock_pub.get_subscription_count() < expected:
+            if time.monotonic() > deadline:
+                self.get_logger().warning(f"/clock has {self.clock_pub.get_subscription_count()} of the {expected} "
+                                          "expected subscriptions: starting anyway")
+                return
+            executor.spin_once(timeout_sec=0.05)
+        self.get_logger().info(f"/clock has its {expected} subscriptions: starting the simulation")
+
     def step(self) -> bool:
         """Advance one ``/clock`` period (lockstep included), publish what is due, pace to
         ``real_time_factor``; False once ``duration`` is reached. For hosts that spin this node in their own
-        executor and drive the simulation from another thread (tests/swarm_graph.py)."""
+        executor and drive the simulation from another thread (fpr_experiments.inprocess)."""
         if self._wall_start is None:
             self._wall_start, self._sim_start = time.monotonic(), self.sim.time
         self.sim.advance(self.clock_period)

@@ -1,0 +1,147 @@
+"""``ros2 run fpr_experiments run <name>|all [options]`` and ``ros2 run fpr_experiments list``.
+
+``run`` flies an experiment's variants (progress line every 2 simulated seconds, a table at the end), writes
+``reports/<experiment>/`` (``metrics.json``, each variant's plots, ``flight.mcap``, ``graph.json``,
+``scenario.yaml``) and exits 0 when every variant completed and passed its flight checks, 1 otherwise, 2 on a
+usage error (an unknown name, a missing file, a bad parameter: one line saying what and what is valid).
+``run all`` runs every experiment and writes ``docs/results.md``; ``run all --report-only`` rebuilds it from the
+``metrics.json`` already in ``reports/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from fpr_experiments.resources import UnknownNameError
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ros2 run fpr_experiments run", description=__doc__.split("\n\n")[0])
+    parser.add_argument("name", help="experiment name (see `ros2 run fpr_experiments list`) or 'all'")
+    parser.add_argument("--quick", action="store_true", help="shortened flights (the test suite's setting)")
+    parser.add_argument("--seed", type=int, default=None, help="override every scenario's seed")
+    parser.add_argument("--cameras", choices=("images", "emulated"), default=None,
+                        help="rendered images + aruco_detector, or emulated marker poses (default: the experiment's)")
+    parser.add_argument("--processes", action="store_true",
+                        help="one process per UAV / ground station / simulator, as on the robot (default: one)")
+    parser.add_argument("--real-time-factor", type=float, default=0.5,
+                        help="pace of the simulator with --processes (default %(default)s; 2 cores here)")
+    parser.add_argument("--variant", action="append", default=None,
+                        help="run only this variant (repeatable; default: all)")
+    parser.add_argument("--output-dir", default=None,
+                        help="reports root (default: $FPR_REPORTS or ./reports)")
+    parser.add_argument("--results", default=None,
+                        help="with 'all': where results.md goes (default: <repo>/docs/results.md)")
+    parser.add_argument("--report-only", action="store_true",
+                        help="with 'all': rebuild results.md from the reports' metrics.json, fly nothing")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    return parser
+
+
+def _results_path(args) -> str:
+    if args.results:
+        return args.results
+    return os.path.join(os.environ.get("FPR_ROOT") or os.getcwd(), "docs", "results.md")
+
+
+def _command_line(args) -> str:
+    parts = ["ros2 run fpr_experiments run all"]
+    if args.quick:
+        parts.append("--quick")
+    if args.seed is not None:
+        parts.append(f"--seed {args.seed}")
+    if args.cameras:
+        parts.append(f"--cameras {args.cameras}")
+    if args.processes:
+        parts.append("--processes")
+    return " ".join(parts)
+
+
+def _write_results(names: list[str], output_root: str, path: str, command: str) -> str:
+    from fpr_experiments import report
+    from fpr_experiments.catalog import load_experiment
+
+    summaries, experiments = [], {}
+    for name in names:
+        metrics = os.path.join(output_root, name, "metrics.json")
+        if not os.path.exists(metrics):
+            print(f"[results] no {metrics}: {name} left out", flush=True)
+            continue
+        with open(metrics, encoding="utf-8") as stream:
+            summaries.append(json.load(stream))
+        experiments[name] = load_experiment(name)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as stream:
+        stream.write(report.results_markdown(summaries, experiments, command))
+    return path
+
+
+def run_main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    from fpr_experiments.catalog import experiment_names
+    from fpr_experiments.runner import default_output_root, run_experiment
+
+    output_root = args.output_dir or default_output_root()
+    try:
+        names = experiment_names() if args.name == "all" else [args.name]
+        if args.report_only:
+            if args.name != "all":
+                raise ValueError("--report-only works with 'all'")
+            print(f"wrote {_write_results(names, output_root, _results_path(args), _command_line(args))}")
+            return 0
+        from fpr_experiments.catalog import load_experiment
+
+        for name in names:
+            load_experiment(name)  # every name and file checked before anything flies
+        start, status, failed = time.monotonic(), 0, []
+        for k, name in enumerate(names):
+            if len(names) > 1:
+                print(f"\n===== [{k + 1}/{len(names)}] {name} ({time.monotonic() - start:.0f} s so far) =====",
+                      flush=True)
+            result = run_experiment(name, seed=args.seed, quick=args.quick, cameras=args.cameras,
+                                    processes=args.processes, variants=args.variant, output_root=output_root,
+                                    real_time_factor=args.real_time_factor, plots=not args.no_plots)
+            if not result.passed:
+                status = 1
+                failed.append(name)
+        if args.name == "all":
+            path = _write_results(names, output_root, _results_path(args), _command_line(args))
+            print(f"\nwrote {path}; {len(names)} experiments in {time.monotonic() - start:.0f} s"
+                  + (f"; checks failed in: {', '.join(failed)}" if failed else "; every check passed"), flush=True)
+        return status
+    except (UnknownNameError, FileNotFoundError, ValueError, TimeoutError, RuntimeError) as error:
+        print(f"error: {error}", file=sys.stderr, flush=True)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def list_main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="ros2 run fpr_experiments list",
+                                     description="List the experiments (name, thesis reference, variants).")
+    parser.add_argument("--verbose", "-v", action="store_true", help="also scenario, script, durations")
+    args = parser.parse_args(argv)
+    from fpr_experiments.catalog import load_all
+
+    try:
+        experiments = load_all()
+    except (UnknownNameError, ValueError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    width = max(len(e.id) for e in experiments)
+    for e in experiments:
+        print(f"{e.id:<{width}}  {e.title}")
+        print(f"{'':<{width}}  {e.thesis}; variants: {', '.join(v.id for v in e.variants)}")
+        if args.verbose:
+            print(f"{'':<{width}}  scenario {e.scenario}, script {e.script}, operator {e.operator}, cameras "
+                  f"{e.cameras}, mode {e.mode}, {e.duration:.0f} s ({e.quick_duration:.0f} s quick)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_main())

@@ -1,0 +1,185 @@
+"""The whole graph in ONE process (rclpy), from the graph description (DESIGN.md §7 "launch-free").
+
+Every node of the description is built from its :class:`~fpr_experiments.graph.NodeSpec` (rcl applies its
+``--ros-args``); all but the simulator spin in one SingleThreadedExecutor in a background thread, the recorder in
+its own. The simulation is stepped by :meth:`InProcessGraph.run_until` in the caller's thread, one ``/clock``
+period at a time, so the caller can stop on a condition. With the simulator's lockstep (default) it waits at every
+20 ms boundary for each streaming UAV's setpoint computed for that period (fpr_sim.simulation), so results do not
+depend on the machine's speed; a backpressure (``max_graph_lag``) keeps the simulation from running ahead of the
+graph while nothing streams (before arming, after landing).
+
+Usage::
+
+    specs = describe_graph(GraphOptions(scenario="hover", script="integration_hover"))
+    with InProcessGraph(specs) as graph:
+        graph.wait_for_discovery()
+        graph.run_until(lambda: graph.sim_time >= 10.0, wall_timeout=120.0)
+        recording = graph.recorder.snapshot()
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from fpr_experiments.graph import NodeSpec
+from fpr_experiments.node_factory import build_node
+from fpr_experiments.recording import Recorder, Topic
+
+#: topics every node has and nobody waits for
+_IGNORED_TOPICS = ("/rosout", "/parameter_events")
+
+
+class InProcessGraph:
+    """See the module doc. A context manager: ``close()`` destroys every node and shuts the context down."""
+
+    def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1) -> None:
+        self.specs = list(specs)
+        self.max_graph_lag = max_graph_lag
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, args=[])
+        self.nodes: list[Node] = []
+        self.by_name: dict[str, Node] = {}
+        self.errors: list[str] = []  #: exceptions raised in callbacks (the graph keeps running)
+        self.simulator = None
+        self.recorder: Recorder | None = None
+        self._running = True
+        self._executor: SingleThreadedExecutor | None = None
+        self._spinner: threading.Thread | None = None
+        try:
+            self._build(topics)
+        except BaseException:
+            self.close()
+            raise
+
+    def _build(self, topics: Sequence[Topic]) -> None:
+        for spec in self.specs:
+            node = build_node(spec, self.context)
+            self.nodes.append(node)
+            self.by_name[spec.fully_qualified_name] = node
+            if spec.executable == "simulator":
+                self.simulator = node
+        use_sim_time = self.simulator is not None
+        self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time)
+        self._executor = SingleThreadedExecutor(context=self.context)
+        for node in self.nodes:
+            if node is not self.simulator:
+                self._executor.add_node(node)
+        # the graph's clock: a node spun by the main executor (its /clock lags as the executor does)
+        self._graph_clock_node = next(n for n in reversed(self.nodes) if n is not self.simulator)
+        self._spinner = threading.Thread(target=self._spin, name="graph_executor", daemon=True)
+        self._spinner.start()
+
+    def _spin(self) -> None:
+        executor = self._executor
+        while self._running and self.context.ok():
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception as error:  # noqa: BLE001 - report, keep the graph alive; metrics decide
+                if not self._running or not self.context.ok():
+                    return
+                self.errors.append(repr(error))
+
+    def node(self, fully_qualified_name: str) -> Node:
+        return self.by_name[fully_qualified_name]
+
+    # ---- discovery ----------------------------------------------------------------------------------
+    def discovery_pending(self) -> list[str]:
+        """Publishers of the graph whose in-graph subscriptions are not all matched yet."""
+        subscriptions: dict[str, int] = {}
+        everyone = [*self.nodes, self.recorder]
+        for node in everyone:
+            for subscription in node.subscriptions:
+                name = subscription.topic_name
+                if not name.startswith(_IGNORED_TOPICS):
+                    subscriptions[name] = subscriptions.get(name, 0) + 1
+        pending = []
+        for node in self.nodes:
+            for publisher in node.publishers:
+                name = publisher.topic_name
+                expected = subscriptions.get(name, 0)
+                if expected and publisher.get_subscription_count() < expected:
+                    pending.append(f"{name} ({publisher.get_subscription_count()}/{expected})")
+        return pending
+
+    def wait_for_discovery(self, timeout: float = 30.0) -> float:
+        """Until every in-graph connection is matched; returns the wall time it took, else ``TimeoutError``."""
+        start = time.monotonic()
+        while pending := self.discovery_pending():
+            if time.monotonic() - start > timeout:
+                raise TimeoutError(f"discovery incomplete after {timeout} s: {pending[:10]}")
+            time.sleep(0.05)
+        return time.monotonic() - start
+
+    # ---- running ------------------------------------------------------------------------------------
+    @property
+    def sim_time(self) -> float:
+        return self.simulator.sim.time
+
+    @property
+    def lockstep_timeouts(self) -> int:
+        return self.simulator.sim.lockstep_timeouts
+
+    def _graph_time(self) -> float:
+        return self._graph_clock_node.get_clock().now().nanoseconds * 1e-9
+
+    def _hold_for_graph(self, wall_deadline: float) -> None:
+        limit = self.max_graph_lag
+        while self.sim_time - self._graph_time() > limit and time.monotonic() < wall_deadline:
+            time.sleep(0.0005)
+
+    def run_until(self, condition: Callable[[], bool], wall_timeout: float, sim_timeout: float = math.inf,
+                  progress: Callable[[], None] | None = None, progress_period: float = 2.0) -> bool:
+        """Step the simulation until ``condition()`` (checked every /clock period); False on a timeout (wall [s]
+        or simulated [s]). ``progress`` is called every ``progress_period`` simulated seconds."""
+        if self.simulator is None:
+            raise RuntimeError("run_until needs the simulator (backend sim)")
+        wall_deadline = time.monotonic() + wall_timeout
+        sim_deadline = self.sim_time + sim_timeout
+        next_progress = self.sim_time + progress_period
+        while not condition():
+            if time.monotonic() > wall_deadline or self.sim_time >= sim_deadline:
+                return False
+            self.simulator.step()
+            self._hold_for_graph(wall_deadline)
+            if progress is not None and self.sim_time >= next_progress - 1e-9:
+                next_progress += progress_period
+                progress()
+        return True
+
+    def wait_for_recorder(self, wall_timeout: float = 30.0) -> bool:
+        """Until the recorder holds the last published ground truth (the graph may lag behind after landing)."""
+        last = self.simulator._next_truth - self.simulator.truth_period
+        return self.recorder.wait_for("/fpr/ground_truth", last, timeout=wall_timeout)
+
+    # ---- teardown -----------------------------------------------------------------------------------
+    def close(self) -> None:
+        self._running = False
+        if self._spinner is not None:
+            self._spinner.join(timeout=5.0)
+        if self._executor is not None:
+            self._executor.shutdown(timeout_sec=1.0)
+        if self.recorder is not None:
+            try:
+                self.recorder.stop()
+            except Exception:  # noqa: BLE001 - best effort at teardown
+                pass
+        for node in reversed(self.nodes):
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001
+                pass
+        self.nodes.clear()
+        self.context.try_shutdown()
+
+    def __enter__(self) -> InProcessGraph:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

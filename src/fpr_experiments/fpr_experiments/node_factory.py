@@ -1,0 +1,57 @@
+"""Build the nodes of a :class:`~fpr_experiments.graph.NodeSpec` inside a process (rclpy): the node class of its
+executable, constructed with the spec's ``--ros-args`` as the node's own ``cli_args`` — rcl then applies the
+``--params-file`` files (only their ``/**`` and matching-node sections), the ``-p`` overrides and the remappings
+to that node alone, exactly as for ``ros2 run``. Used by the in-process runner and by ``node_group``."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+
+from rclpy.node import Node
+
+from fpr_experiments.graph import NodeSpec
+
+#: executable -> "module:NodeClass"; each module's ``main`` is the executable's console script (checked by a test)
+NODE_CLASSES: dict[str, str] = {
+    "simulator": "fpr_sim.simulator:SimulatorNode",
+    "px4_bridge": "fpr_px4_bridge.px4_bridge_node:Px4BridgeNode",
+    "aruco_detector": "fpr_estimation.aruco_detector:ArucoDetectorNode",
+    "pose_estimator": "fpr_estimation.pose_estimator:PoseEstimatorNode",
+    "controller": "fpr_control.controller_node:ControllerNode",
+    "teleop": "fpr_control.teleop_node:TeleopNode",
+    "joy_script": "fpr_control.joy_script_node:JoyScriptNode",
+    "joystick": "fpr_control.joystick_node:JoystickNode",
+    "pilot": "fpr_experiments.pilot_node:PilotNode",
+    "info_link": "fpr_experiments.info_link_node:InfoLinkNode",
+}
+
+
+def node_class(executable: str) -> type[Node]:
+    try:
+        module_name, class_name = NODE_CLASSES[executable].split(":")
+    except KeyError:
+        raise ValueError(f"no node class known for executable '{executable}'; known: {', '.join(NODE_CLASSES)}") \
+            from None
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def build_node(spec: NodeSpec, context) -> Node:
+    """One node of ``spec`` in ``context`` (its parameters, name, namespace and remappings from its ros_args)."""
+    return node_class(spec.executable)(context=context, cli_args=spec.ros_args(), use_global_arguments=False)
+
+
+def build_nodes(specs: Sequence[NodeSpec], context) -> list[Node]:
+    """All nodes of ``specs`` in order; on a failure the ones already built are destroyed, then it raises."""
+    nodes: list[Node] = []
+    try:
+        for spec in specs:
+            nodes.append(build_node(spec, context))
+    except BaseException:
+        for node in reversed(nodes):
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - best effort before re-raising the real error
+                pass
+        raise
+    return nodes

@@ -1,0 +1,139 @@
+"""The graph as SEPARATE PROCESSES, grouped as on the robot (DESIGN.md §7): one ``node_group`` process per UAV
+(its companion computer: bridge, detector, estimator, controller), one for the ground station (teleop +
+operator), one for a fault-injecting link if any, and the simulator alone (``ros2 run fpr_sim simulator``), all
+from the same graph description as the in-process runner. This process only records. The simulator runs its own
+loop, paced at ``real_time_factor`` (the other processes must keep up on the machine's cores) with its lockstep
+on, and stops at the run's duration.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+
+from fpr_experiments.graph import NodeSpec, groups, write_graph_file
+from fpr_experiments.recording import Topic
+
+#: [s] wall: every group process must print READY within this
+READY_TIMEOUT = 120.0
+_TIMEOUTS = re.compile(r"lockstep timeouts: (\d+)")
+_TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
+
+
+class _Process:
+    def __init__(self, name: str, command: list[str], log_dir: str) -> None:
+        self.name = name
+        self.lines: list[str] = []
+        self.ready = threading.Event()
+        self.log = open(os.path.join(log_dir, f"{name}.log"), "w", encoding="utf-8")  # noqa: SIM115 - closed
+        self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                        bufsize=1)
+        self._thread = threading.Thread(target=self._drain, name=f"drain-{name}", daemon=True)
+        self._thread.start()
+
+    def _drain(self) -> None:
+        for line in self.process.stdout:
+            line = line.rstrip()
+            self.lines.append(line)
+            self.log.write(line + "\n")
+            if line.startswith("READY"):
+                self.ready.set()
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+        try:
+            self.process.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self._thread.join(timeout=5.0)
+        self.log.close()
+
+
+class _Clock:
+    """What the progress line needs, read from the recorder and the simulator's log."""
+
+    def __init__(self, recorder, simulator: _Process) -> None:
+        self.recorder, self.simulator = recorder, simulator
+
+    @property
+    def sim_time(self) -> float:
+        return self.recorder.latest_time("/clock") or 0.0
+
+    @property
+    def lockstep_timeouts(self) -> int:
+        counts = [int(m.group(1)) for line in self.simulator.lines for m in [_TIMEOUT_WARNING.search(line)] if m]
+        return counts[-1] if counts else 0
+
+
+def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: float, *, output_dir: str,
+                  real_time_factor: float = 0.5, label: str = "run", log: bool = True):
+    """Fly ``duration`` simulated seconds; returns (recording, completed, lockstep timeouts, errors, wall)."""
+    import rclpy
+
+    from fpr_experiments.recording import Recorder
+    from fpr_experiments.runner import PROGRESS_PERIOD, WALL_PER_SIM_SECOND, Progress
+
+    log_dir = os.path.join(output_dir, "logs")
+    os.makedirs(log_dir, exist_ok=True)
+    graph_file = os.path.join(output_dir, "graph.json")
+    write_graph_file(specs, graph_file)
+    by_group = groups(specs)
+    n = sum(1 for s in specs if s.executable == "controller")
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[])
+    recorder = Recorder(context, topics, use_sim_time=True)
+    processes: dict[str, _Process] = {}
+    errors: list[str] = []
+    try:
+        for group in by_group:
+            if group != "simulator":
+                processes[group] = _Process(group, ["ros2", "run", "fpr_experiments", "node_group", "--graph",
+                                                    graph_file, "--group", group], log_dir)
+        deadline = time.monotonic() + READY_TIMEOUT
+        for name, process in processes.items():
+            if not process.ready.wait(max(0.0, deadline - time.monotonic())):
+                raise RuntimeError(f"{name} not ready after {READY_TIMEOUT:.0f} s: {process.lines[-15:]}")
+        expected = {"/fpr/teleop": 1, "/fpr/info": n, **{f"/fpr/uav{i}/diagnostics": 1 for i in range(1, n + 1)}}
+        recorder.wait_for_publishers(expected, timeout=30.0)
+        simulator_spec = next(s for s in specs if s.executable == "simulator")
+        # every other node runs on simulated time (one /clock subscription each), and so does the recorder
+        clock_subscribers = len(specs) - 1 + 1
+        simulator_spec = replace(simulator_spec, parameters={
+            **simulator_spec.parameters, "duration": float(duration), "real_time_factor": float(real_time_factor),
+            "wait_for_clock_subscribers": clock_subscribers})
+        start = time.monotonic()
+        processes["simulator"] = simulator = _Process("simulator", simulator_spec.command(), log_dir)
+        clock = _Clock(recorder, simulator)
+        progress = Progress(label, clock, duration) if log else None
+        next_progress = PROGRESS_PERIOD
+        wall_deadline = start + 60.0 + WALL_PER_SIM_SECOND * duration
+        while simulator.process.poll() is None and time.monotonic() < wall_deadline:
+            time.sleep(0.2)
+            if progress is not None and clock.sim_time >= next_progress:
+                next_progress += PROGRESS_PERIOD
+                progress()
+        completed = simulator.process.poll() == 0
+        wall = time.monotonic() - start
+        if simulator.process.poll() is None:
+            errors.append(f"simulator did not reach {duration} s within the wall-clock budget")
+        elif simulator.process.returncode != 0:
+            errors.append(f"simulator exited with {simulator.process.returncode}: {simulator.lines[-5:]}")
+        recorder.wait_for("/fpr/ground_truth", duration - 0.02, timeout=10.0)
+        time.sleep(0.3)  # messages in flight from the other processes
+        recording = recorder.snapshot()
+        timeouts = [int(m.group(1)) for line in simulator.lines for m in [_TIMEOUTS.search(line)] if m]
+        for name, process in processes.items():
+            errors += [f"{name}: {line}" for line in process.lines if line.startswith(("CALLBACK_ERROR", "Traceback"))]
+        return recording, completed, timeouts[-1] if timeouts else clock.lockstep_timeouts, errors, wall
+    finally:
+        for process in processes.values():
+            process.stop()
+        recorder.stop()
+        context.try_shutdown()

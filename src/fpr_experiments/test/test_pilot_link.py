@@ -1,0 +1,96 @@
+"""The scripted operator (ROS-free) on a toy platform that follows the velocity command, and the link outage."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fpr_experiments.link import LinkOutage
+from fpr_experiments.pilot import Channel, Observation, Pilot, PilotConfig, Task, TaskPlan, pilot_from_script
+
+#: the default teleop mapping's channels (fpr_control config/teleop.yaml)
+CHANNELS = {"velocity_x": Channel(4, 0.5, minimum=-0.5, maximum=0.5),
+            "velocity_y": Channel(3, 0.5, minimum=-0.5, maximum=0.5),
+            "velocity_z": Channel(1, 0.3, minimum=-0.3, maximum=0.3),
+            "yaw_rate": Channel(0, 0.5), "contact_force": Channel(2, -5.0, center=1.0, minimum=0.0, maximum=10.0)}
+DEAD_ZONE = 0.08
+
+
+def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, contact_height: float = np.inf):
+    """A platform whose velocity in F_Fp is what the sticks ask (the teleop's dead zone, no dynamics)."""
+    position, dt, events, samples = start.astype(float), 0.02, [], []
+    for step in range(int(duration / dt)):
+        t = step * dt
+        contact = 5.0 if position[2] >= contact_height else 0.0
+        pilot.observe(Observation(t, position.copy(), yaw, contact))
+        axes = pilot.axes(t)
+        stick = {name: axes.get(c.axis, c.center) for name, c in CHANNELS.items()}
+
+        def speed(name: str, stick=stick) -> float:
+            value = stick[name] - CHANNELS[name].center
+            return 0.0 if abs(value) < DEAD_ZONE else value * CHANNELS[name].scale
+
+        flat = np.array([speed("velocity_x"), speed("velocity_y"), speed("velocity_z")])
+        world = np.array([np.cos(yaw) * flat[0] - np.sin(yaw) * flat[1], np.sin(yaw) * flat[0] + np.cos(yaw) * flat[1],
+                          flat[2]])
+        position = position + world * dt
+        if position[2] > contact_height:
+            position[2] = contact_height
+        events += pilot.take_events()
+        samples.append((t, stick["contact_force"]))
+    return position, events, samples
+
+
+def test_goto_tasks_reach_their_targets_and_report_success():
+    plan = TaskPlan(1.0, 60.0, [Task("goto", target=[0.6, 0.0, 2.1]), Task("goto", target=[-0.3, 0.5, 1.9])])
+    pilot = Pilot(PilotConfig(seed=1), plan, CHANNELS)
+    final, events, _ = _fly(pilot, np.array([0.0, 0.0, 2.0]), 40.0)
+    ends = [e for e in events if e["event"] == "task_end"]
+    assert [e["success"] for e in ends] == [True, True]
+    assert [e["event"] for e in events if e["task"] == 1][:2] == ["task_start", "criterion_reached"]
+    assert np.linalg.norm(final - [-0.3, 0.5, 1.9]) < 0.1  # holds the last target afterwards
+
+
+def test_an_unreachable_target_times_out_as_a_failure():
+    plan = TaskPlan(0.0, 30.0, [Task("goto", target=[0.0, 0.0, 2.0], timeout=5.0, axes=["x", "y"])])
+    pilot = Pilot(PilotConfig(seed=2), plan, CHANNELS)
+    _, events, _ = _fly(pilot, np.array([0.0, 0.0, 1.0]), 10.0)  # z not driven: never within 10 cm
+    end = next(e for e in events if e["event"] == "task_end")
+    assert not end["success"] and "not reached" in end["reason"]
+
+
+def test_push_aligns_climbs_to_contact_then_asks_for_the_force():
+    plan = TaskPlan(0.0, 60.0, [Task("push", target=[0.0, 0.0, 2.2], align_radius=0.05, approach_speed=0.1,
+                                     force=5.0, ramp=2.0, duration=5.0, axes=["z", "force"])])
+    pilot = Pilot(PilotConfig(seed=3, stick_noise=0.0), plan, CHANNELS)
+    _, events, samples = _fly(pilot, np.array([0.0, 0.0, 2.0]), 20.0, contact_height=2.1)
+    kinds = [e["event"] for e in events]
+    assert kinds[:2] == ["task_start", "contact"] and kinds[2] == "task_end" and events[2]["success"]
+    forces = [-5.0 * (s - 1.0) for _, s in samples]  # the mapping: released +1 -> 0 N, scale -5 N per unit
+    assert max(forces) == pytest.approx(5.0, abs=0.05)  # the trigger reached 5 N
+
+
+def test_the_operator_does_not_climb_before_alignment():
+    plan = TaskPlan(0.0, 60.0, [Task("push", target=[1.0, 0.0, 2.5], align_radius=0.05, axes=["z", "force"])])
+    pilot = Pilot(PilotConfig(seed=4, stick_noise=0.0), plan, CHANNELS)
+    final, events, _ = _fly(pilot, np.array([0.0, 0.0, 2.0]), 10.0)  # x not driven: never aligned
+    assert final[2] == pytest.approx(2.0, abs=0.02) and not any(e["event"] == "contact" for e in events)
+
+
+def test_pilot_scripts_are_validated():
+    config, plan = pilot_from_script({"pilot": {"reaction_delay": 0.3}, "tasks": {
+        "start": 2.0, "end": 10.0, "list": [{"kind": "goto", "target": [0, 0, 2]}]}})
+    assert config.reaction_delay == 0.3 and plan.tasks[0].kind == "goto"
+    with pytest.raises(ValueError, match="unknown key"):
+        pilot_from_script({"pilot": {"reaction": 0.3}})
+    with pytest.raises(ValueError, match="task kind 'fly'"):
+        pilot_from_script({"tasks": {"list": [{"kind": "fly"}]}})
+    with pytest.raises(ValueError, match="no absolute axis channel"):
+        Pilot(PilotConfig(), TaskPlan(0, 1, [Task("goto")]), {})
+
+
+def test_link_outage_drops_only_inside_its_window():
+    outage = LinkOutage(10.0, 13.0)
+    assert [outage.passes(t) for t in (9.99, 10.0, 12.99, 13.0)] == [True, False, False, True]
+    assert LinkOutage().passes(1e9)
+    with pytest.raises(ValueError):
+        LinkOutage(5.0, 4.0)

@@ -1,0 +1,83 @@
+"""Every experiment of fpr_experiments runs by name with ``--quick`` (shortened flights): each flight completes with
+no callback error and passes its checks — the experiment's own thresholds on its flight metrics plus the ones
+every flight must keep (roll and pitch under 30 deg, no UAV touching the ground unless landing, no fly-away, no
+NaN). The full durations run through ``ros2 run fpr_experiments run all`` (docs/results.md). The quick run flies
+each experiment's ``quick_variants`` (every controller mode, observer and task kind is flown by at least one);
+assertions on metrics only, never on wall time.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+
+import pytest
+from fpr_experiments.catalog import experiment_names, load_experiment
+from fpr_experiments.runner import run_experiment
+
+
+@pytest.mark.parametrize("name", experiment_names())
+def test_experiment_runs_quick_and_passes_its_checks(name, tmp_path):
+    experiment = load_experiment(name)
+    variants = experiment.quick_variants or None
+    result = run_experiment(name, quick=True, variants=variants, output_root=str(tmp_path), plots=False)
+    assert set(result.variants) == set(variants or [v.id for v in experiment.variants])
+    for variant_id, variant in result.variants.items():
+        failed = [c.text() for c in variant.checks if not c.passed]
+        assert variant.completed, f"{name}/{variant_id} did not complete"
+        assert not variant.callback_errors, variant.callback_errors[:3]
+        assert not failed, f"{name}/{variant_id}: {failed}"
+        assert os.path.getsize(os.path.join(variant.report_dir, "flight.mcap")) > 10_000
+        assert all(math.isfinite(variant.metrics[m]) for m in ("max_abs_roll_deg", "max_height_m"))
+    assert os.path.exists(os.path.join(result.report_dir, "metrics.json"))
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ros2", "run", "fpr_experiments", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_list_shows_every_experiment():
+    done = _cli("list")
+    assert done.returncode == 0, done.stderr
+    for name in experiment_names():
+        assert name in done.stdout
+
+
+def _experiment_file(tmp_path, **changes) -> str:
+    import yaml
+
+    data = {"id": "bad", "title": "a bad experiment", "scenario": "ground_start", "script": "integration_flight",
+            "duration": 2.0, "quick_duration": 1.0, "variants": [{"id": "a"}], "metrics": [{"metric": "roll_rmse_deg"}],
+            **changes}
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("unknown name", "error: unknown experiment 'table_9_9'; valid: "),
+    ("unknown variant", "error: experiment 'table_3_2' has no variant 'lqr'; valid: "),
+    ("missing file", "error: unknown experiment '/no/such/experiment.yaml'; valid: "),
+    ("unknown scenario", "error: unknown scenario 'nowhere'; valid: "),
+    ("bad mode", "error: mode 'bogus' is not one of centralized, "),
+    ("bad node parameter", "error: period, info_timeout, max_thrust must be > 0"),
+])
+def test_a_wrong_name_file_or_parameter_is_one_clear_line_and_a_non_zero_exit(case, message, tmp_path):
+    args = {"unknown name": lambda: ("run", "table_9_9"),
+            "unknown variant": lambda: ("run", "table_3_2", "--variant", "lqr"),
+            "missing file": lambda: ("run", "/no/such/experiment.yaml"),
+            "unknown scenario": lambda: ("run", _experiment_file(tmp_path, scenario="nowhere")),
+            "bad mode": lambda: ("run", _experiment_file(tmp_path, mode="bogus"), "--output-dir", str(tmp_path)),
+            "bad node parameter": lambda: ("run", _experiment_file(tmp_path, parameters={
+                "controller": {"max_thrust": -1.0}}), "--output-dir", str(tmp_path))}[case]()
+    done = _cli(*args)
+    assert done.returncode == 2, done.stdout[-2000:] + done.stderr[-2000:]
+    lines = [line for line in done.stderr.strip().splitlines() if line and not line.startswith("[")]
+    assert len(lines) == 1 and lines[0].startswith(message), done.stderr[-3000:]
+    assert "Traceback" not in done.stderr + done.stdout
+
+
+def test_a_bad_option_value_is_refused_by_the_parser():
+    done = _cli("run", "table_3_2", "--cameras", "infrared")
+    assert done.returncode == 2 and "invalid choice: 'infrared'" in done.stderr
