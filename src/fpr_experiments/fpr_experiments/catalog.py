@@ -171,14 +171,20 @@ class Experiment:
 
 
 # ------------------------------------------------------------------------------------------------ loading
-def _from_dict(cls: type, data: Any, path: str) -> Any:
+def check_keys(cls: type, data: Any, path: str) -> dict:
+    """``data`` as a dict of ``cls``'s fields; a non-mapping or an unknown key is a ValueError naming the valid
+    keys (shared by the experiment and the pilot-script loaders)."""
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a mapping, got {data!r}")
     names = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(data) - set(names))
     if unknown:
         raise ValueError(f"{path}: unknown key(s) {unknown}; valid keys are {names}")
-    values = dict(data)
+    return dict(data)
+
+
+def _from_dict(cls: type, data: Any, path: str) -> Any:
+    values = check_keys(cls, data, path)
     if cls is Experiment or cls is Variant:
         values["uav_parameters"] = [_from_dict(UavParameters, u, f"{path}.uav_parameters[{k}]")
                                     for k, u in enumerate(values.get("uav_parameters", []) or [])]

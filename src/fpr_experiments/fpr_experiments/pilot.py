@@ -38,7 +38,6 @@ After the last task and until ``end`` the pilot holds the last target. Everythin
 from __future__ import annotations
 
 import collections
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -125,13 +124,9 @@ class TaskPlan:
 
 
 def _from_dict(cls, data: Any, path: str):
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping, got {data!r}")
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        raise ValueError(f"{path}: unknown key(s) {unknown}; valid keys are {names}")
-    return cls(**data)
+    from fpr_experiments.catalog import check_keys
+
+    return cls(**check_keys(cls, data, path))
 
 
 def pilot_from_script(document: dict) -> tuple[PilotConfig, TaskPlan]:
