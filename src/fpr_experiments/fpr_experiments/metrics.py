@@ -374,18 +374,22 @@ def _force_metrics(record: FlightRecord, u, t: np.ndarray, mask: np.ndarray, des
     return out
 
 
-def recovery_time(record: FlightRecord, link_restored: float) -> float:
-    """[s] from ``link_restored`` until the last UAV leaves the NC fallback for good (NaN: never did)."""
+def recovery_time(record: FlightRecord, link_restored: float, hold_for: float = 1.0) -> float:
+    """[s] from ``link_restored`` until every UAV is out of the NC fallback and stays out for ``hold_for`` s (a
+    later fallback, e.g. once the robot has landed and the estimates go stale, is not this recovery); NaN if one
+    never recovered."""
     latest = link_restored
     for u in record.uavs:
-        after = u.diagnostics_t >= link_restored
-        if not after.any():
+        t, fallback = u.diagnostics_t, u.fallback.astype(bool)
+        recovered = math.nan
+        for k in np.flatnonzero((t >= link_restored) & ~fallback):
+            stays = (t >= t[k]) & (t <= t[k] + hold_for)
+            if not fallback[stays].any():  # out for hold_for s (or until the record ends)
+                recovered = float(t[k])
+                break
+        if math.isnan(recovered):
             return math.nan
-        still = u.diagnostics_t[after & u.fallback]
-        if len(still) and still[-1] >= u.diagnostics_t[-1] - 1e-9:
-            return math.nan
-        if len(still):
-            latest = max(latest, float(still[-1]))
+        latest = max(latest, recovered)
     return latest - link_restored
 
 

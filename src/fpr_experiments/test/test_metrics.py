@@ -119,6 +119,9 @@ def test_recovery_time_after_a_link_outage():
     for uav in record.uavs:
         uav.fallback = (uav.diagnostics_t >= 10.0) & (uav.diagnostics_t < 13.2 + 0.02 * uav.uav_id)
     assert fm.recovery_time(record, 13.0) == pytest.approx(0.26, abs=0.021)
+    for uav in record.uavs:  # back, then a fallback again once landed (stale estimates): not this recovery
+        uav.fallback = ((uav.diagnostics_t >= 10.0) & (uav.diagnostics_t < 13.1)) | (uav.diagnostics_t >= 18.5)
+    assert fm.recovery_time(record, 13.0) == pytest.approx(0.1, abs=0.021)
     for uav in record.uavs:
         uav.fallback = uav.diagnostics_t >= 10.0  # never back
     assert math.isnan(fm.recovery_time(record, 13.0))
