@@ -1,12 +1,23 @@
 """The whole graph in ONE process (rclpy), from the graph description (DESIGN.md §7 "launch-free").
 
 Every node of the description is built from its :class:`~fpr_experiments.graph.NodeSpec` (rcl applies its
-``--ros-args``); all but the simulator spin in one SingleThreadedExecutor in a background thread, the recorder in
-its own. The simulation is stepped by :meth:`InProcessGraph.run_until` in the caller's thread, one ``/clock``
-period at a time, so the caller can stop on a condition. With the simulator's lockstep (default) it waits at every
-20 ms boundary for each streaming UAV's setpoint computed for that period (fpr_sim.simulation), so results do not
-depend on the machine's speed; a backpressure (``max_graph_lag``) keeps the simulation from running ahead of the
-graph while nothing streams (before arming, after landing).
+``--ros-args``); the recorder spins in an executor thread of its own. The simulation is stepped by
+:meth:`InProcessGraph.run_until` in the caller's thread, one ``/clock`` period at a time, so the caller can stop on
+a condition. Two ways to run the graph:
+
+- ``deterministic`` (default): ONE thread does everything in a fixed order. Each period: the simulator advances
+  and publishes (``/clock``, ground truth, cameras; its PX4 emulators send their telemetry over UDP), the graph's
+  executor is drained (every callback that period made ready runs, to quiescence: DDS delivery inside one
+  context is synchronous, so what a callback publishes is ready for the next wait), each bridge reads the MAVLink
+  waiting on its socket (its receive thread is off, ``receive_thread: false``), and the executor is drained
+  again. The setpoints computed on ``/clock`` T are on the emulators' sockets before the simulation passes T, so
+  the simulator's own lockstep is off (the drain is the lockstep). Nothing depends on wall time or on thread
+  scheduling: the same scenario and seed give the same ground truth bit for bit on an idle or a loaded machine
+  (tests/test_determinism.py).
+- threaded: the graph spins in a background executor thread; the simulator's lockstep waits at every 20 ms
+  boundary for each streaming UAV's setpoint computed for that period (fpr_sim.simulation), and a backpressure
+  (``max_graph_lag``) keeps the simulation from running ahead of the graph while nothing streams. Results then
+  depend on the callbacks' order, which varies with load (kept for comparison: benchmarks/bench_graph.py).
 
 Usage::
 
@@ -23,9 +34,10 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.node import Node
 
 from fpr_experiments.graph import NodeSpec
@@ -39,9 +51,16 @@ _IGNORED_TOPICS = ("/rosout", "/parameter_events")
 class InProcessGraph:
     """See the module doc. A context manager: ``close()`` destroys every node and shuts the context down."""
 
-    def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1) -> None:
+    def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
+                 lean: bool = True, deterministic: bool = True) -> None:
+        self.deterministic = deterministic
+        if deterministic:  # bridges read MAVLink when told; the drain replaces the simulator's lockstep
+            specs = [replace(s, parameters={**s.parameters, "receive_thread": False}) if s.executable == "px4_bridge"
+                     else replace(s, parameters={**s.parameters, "lockstep": False}) if s.executable == "simulator"
+                     else s for s in specs]
         self.specs = list(specs)
         self.max_graph_lag = max_graph_lag
+        self.lean = lean  #: nodes without parameter services / default QoS event handlers (node_factory.build_node)
         self.context = rclpy.Context()
         rclpy.init(context=self.context, args=[])
         self.nodes: list[Node] = []
@@ -60,7 +79,7 @@ class InProcessGraph:
 
     def _build(self, topics: Sequence[Topic]) -> None:
         for spec in self.specs:
-            node = build_node(spec, self.context)
+            node = build_node(spec, self.context, lean=self.lean)
             self.nodes.append(node)
             self.by_name[spec.fully_qualified_name] = node
             if spec.executable == "simulator":
@@ -73,8 +92,11 @@ class InProcessGraph:
                 self._executor.add_node(node)
         # the graph's clock: a node spun by the main executor (its /clock lags as the executor does)
         self._graph_clock_node = next(n for n in reversed(self.nodes) if n is not self.simulator)
-        self._spinner = threading.Thread(target=self._spin, name="graph_executor", daemon=True)
-        self._spinner.start()
+        self._bridges = [node for spec, node in zip(self.specs, self.nodes, strict=True)
+                         if spec.executable == "px4_bridge"]
+        if not self.deterministic:
+            self._spinner = threading.Thread(target=self._spin, name="graph_executor", daemon=True)
+            self._spinner.start()
 
     def _spin(self) -> None:
         executor = self._executor
@@ -86,26 +108,59 @@ class InProcessGraph:
                     return
                 self.errors.append(repr(error))
 
+    def drain(self) -> int:
+        """Deterministic mode: run every ready callback of the graph, and what they make ready, until two waits
+        in a row find nothing (rclpy's executor answers one wait per generator: the first empty answer can be the
+        end of the previous batch); callback exceptions are kept in :attr:`errors`. Returns the callbacks run."""
+        executor, done, empty = self._executor, 0, 0
+        while empty < 2:
+            try:
+                handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0.0)
+            except TimeoutException:
+                empty += 1
+                continue
+            except ExternalShutdownException:
+                return done
+            empty = 0
+            handler()
+            done += 1
+            if handler.exception() is not None:  # report, keep the graph alive; the metrics decide
+                self.errors.append(repr(handler.exception()))
+        return done
+
+    def _deterministic_step(self) -> None:
+        self.simulator.step()
+        self.drain()
+        for bridge in self._bridges:
+            bridge.receive_pending()
+        self.drain()
+
     def node(self, fully_qualified_name: str) -> Node:
         return self.by_name[fully_qualified_name]
 
     # ---- discovery ----------------------------------------------------------------------------------
     def discovery_pending(self) -> list[str]:
-        """Publishers of the graph whose in-graph subscriptions are not all matched yet."""
-        subscriptions: dict[str, int] = {}
-        everyone = [*self.nodes, self.recorder]
-        for node in everyone:
-            for subscription in node.subscriptions:
-                name = subscription.topic_name
-                if not name.startswith(_IGNORED_TOPICS):
-                    subscriptions[name] = subscriptions.get(name, 0) + 1
-        pending = []
-        for node in self.nodes:
+        """In-graph connections not matched yet, seen from both ends: a publisher with fewer matched subscriptions
+        than the graph has on its topic, or a subscription with fewer matched publishers (discovery is
+        asymmetric: a writer can match before its reader does, and the reader would miss the first messages)."""
+        publishers: dict[str, list] = {}
+        subscriptions: dict[str, list] = {}
+        for node in [*self.nodes, self.recorder]:
             for publisher in node.publishers:
-                name = publisher.topic_name
-                expected = subscriptions.get(name, 0)
-                if expected and publisher.get_subscription_count() < expected:
-                    pending.append(f"{name} ({publisher.get_subscription_count()}/{expected})")
+                if not publisher.topic_name.startswith(_IGNORED_TOPICS):
+                    publishers.setdefault(publisher.topic_name, []).append(publisher)
+            for subscription in node.subscriptions:
+                if not subscription.topic_name.startswith(_IGNORED_TOPICS):
+                    subscriptions.setdefault(subscription.topic_name, []).append(subscription)
+        pending = []
+        for name, pubs in publishers.items():
+            subs = subscriptions.get(name, [])
+            for publisher in pubs:
+                if publisher.get_subscription_count() < len(subs):
+                    pending.append(f"{name} publisher ({publisher.get_subscription_count()}/{len(subs)})")
+            for subscription in subs:
+                if subscription.get_publisher_count() < len(pubs):
+                    pending.append(f"{name} subscription ({subscription.get_publisher_count()}/{len(pubs)})")
         return pending
 
     def wait_for_discovery(self, timeout: float = 30.0) -> float:
@@ -146,8 +201,11 @@ class InProcessGraph:
         while not condition():
             if time.monotonic() > wall_deadline or self.sim_time >= sim_deadline:
                 return False
-            self.simulator.step()
-            self._hold_for_graph(wall_deadline)
+            if self.deterministic:
+                self._deterministic_step()
+            else:
+                self.simulator.step()
+                self._hold_for_graph(wall_deadline)
             if progress is not None and self.sim_time >= next_progress - 1e-9:
                 next_progress += progress_period
                 progress()
@@ -155,8 +213,8 @@ class InProcessGraph:
 
     def wait_for_recorder(self, wall_timeout: float = 30.0) -> bool:
         """Until the recorder holds the last published ground truth (the graph may lag behind after landing)."""
-        last = self.simulator._next_truth - self.simulator.truth_period
-        return self.recorder.wait_for("/fpr/ground_truth", last, timeout=wall_timeout)
+        last = self.simulator.last_truth_time
+        return last is None or self.recorder.wait_for("/fpr/ground_truth", last, timeout=wall_timeout)
 
     # ---- teardown -----------------------------------------------------------------------------------
     def close(self) -> None:

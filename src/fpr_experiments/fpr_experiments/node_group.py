@@ -22,6 +22,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="node_group", description=__doc__.split("\n\n")[0])
     parser.add_argument("--graph", required=True, help="graph.json (fpr_experiments.graph.write_graph_file)")
     parser.add_argument("--group", required=True, help="process group: uav<i>, ground, link, simulator")
+    parser.add_argument("--lean", action="store_true",
+                        help="no parameter services / default QoS event handlers (simulation runs, node_factory)")
     args, _ros_args = parser.parse_known_args(argv)
     try:
         specs = groups(read_graph_file(args.graph))
@@ -39,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
 
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
-    nodes = build_nodes(specs[args.group], context)
+    nodes = build_nodes(specs[args.group], context, lean=args.lean)
     executor = SingleThreadedExecutor(context=context)
     for node in nodes:
         executor.add_node(node)

@@ -95,7 +95,7 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
         for group in by_group:
             if group != "simulator":
                 processes[group] = _Process(group, ["ros2", "run", "fpr_experiments", "node_group", "--graph",
-                                                    graph_file, "--group", group], log_dir)
+                                                    graph_file, "--group", group, "--lean"], log_dir)
         deadline = time.monotonic() + READY_TIMEOUT
         for name, process in processes.items():
             if not process.ready.wait(max(0.0, deadline - time.monotonic())):

@@ -63,6 +63,8 @@ _PARAMETERS = {
     "status_rate": (10.0, "[Hz] status publication rate"),
     "body_frame_id": ("", "frame_id of imu and velocity_body; empty: uav<i>/base_link"),
     "teleop_topic": ("/fpr/teleop", "TeleopCommand topic (mode: idle / arm / fly / land / kill)"),
+    "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
+                             "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
 }
 
 
@@ -138,8 +140,10 @@ class Px4BridgeNode(Node):
         self.create_timer(1.0 / float(p["status_rate"]), self._on_status)
 
         self._running = True
-        self._rx_thread = threading.Thread(target=self._receive_loop, name="px4_bridge_rx", daemon=True)
-        self._rx_thread.start()
+        self._rx_thread: threading.Thread | None = None
+        if bool(p["receive_thread"]):
+            self._rx_thread = threading.Thread(target=self._receive_loop, name="px4_bridge_rx", daemon=True)
+            self._rx_thread.start()
         address = self.link.local_address or self.link.spec.device
         self.get_logger().info(
             f"px4_bridge uav {uav_id}: {url} (bound {address}), PX4 system {target_system}, "
@@ -202,21 +206,27 @@ class Px4BridgeNode(Node):
                 return  # socket closed at shutdown
             if not ready or not self._running:
                 continue
-            now = self._now()
-            if now <= 0.0:
-                # use_sim_time before the first /clock: no time to judge or stamp with. Drop the input, or its
-                # zero receive time would skew the time_boot_ms mapping (and link age) once the clock runs.
-                with self._lock:
-                    dropped = len(self.link.receive())
+            self.receive_pending()
+
+    def receive_pending(self) -> None:
+        """Read and handle every MAVLink message waiting on the link now (non-blocking): what the receive thread
+        does on each wake-up; with ``receive_thread`` false the owner calls it (at deterministic instants)."""
+        now = self._now()
+        if now <= 0.0:
+            # use_sim_time before the first /clock: no time to judge or stamp with. Drop the input, or its
+            # zero receive time would skew the time_boot_ms mapping (and link age) once the clock runs.
+            with self._lock:
+                dropped = len(self.link.receive())
+            if dropped:
                 self.get_logger().info(f"no /clock yet (use_sim_time): dropped {dropped} MAVLink messages",
                                        throttle_duration_sec=5.0)
-                continue
-            with self._lock:
-                samples = self.bridge.poll(now)
-                events = self.bridge.take_events()
-            self._log.emit(events)
-            for sample in samples:
-                self._publish(sample)
+            return
+        with self._lock:
+            samples = self.bridge.poll(now)
+            events = self.bridge.take_events()
+        self._log.emit(events)
+        for sample in samples:
+            self._publish(sample)
 
     def _stamp(self, seconds: float):
         return Time(nanoseconds=max(0, int(seconds * 1e9)), clock_type=self.get_clock().clock_type).to_msg()
@@ -260,7 +270,7 @@ class Px4BridgeNode(Node):
 
     def destroy_node(self) -> None:
         self._running = False
-        if self._rx_thread.is_alive():
+        if self._rx_thread is not None and self._rx_thread.is_alive():
             self._rx_thread.join(timeout=1.0)
         self.link.close()
         super().destroy_node()

@@ -97,6 +97,7 @@ from fpr_px4_bridge.px4_protocol import (
     Px4MainMode,
     encode_custom_mode,
     import_mavlink,
+    mode_name,
 )
 
 from fpr_sim.scenario import Px4Config
@@ -408,6 +409,18 @@ class Px4Emulator:
     @property
     def offboard(self) -> bool:
         return self.main_mode == Px4MainMode.OFFBOARD
+
+    @property
+    def takes_offboard_setpoints(self) -> bool:
+        """Armed, and not in a mode that ignores the offboard stream (AUTO.LAND, AUTO.LOITER: the operator's LAND
+        and the failsafes): the simulator's lockstep waits for a live stream only while this holds."""
+        return self.armed and not (self.main_mode == Px4MainMode.AUTO and self.sub_mode in (
+            Px4AutoSubMode.LAND, Px4AutoSubMode.LOITER))
+
+    @property
+    def mode_name(self) -> str:
+        """The main/sub mode as PX4 names it (OFFBOARD, POSCTL, AUTO.LAND, ...), for messages."""
+        return mode_name(self.main_mode, self.sub_mode) + ("" if self.armed else " (disarmed)")
 
     @property
     def needs_rc(self) -> bool:

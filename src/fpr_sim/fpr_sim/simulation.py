@@ -20,9 +20,17 @@ boundaries (a setpoint computed at T_{k-1} + 4 ms serves T_k). Scripted MAVLink 
 
 A stream is live when a new setpoint arrived during the previous control period, armed or not (so the stream that
 must precede arming and OFFBOARD is seen at its true rate in simulation time, however fast the simulation could
-run), or while an armed OFFBOARD UAV has not received any setpoint yet (a scenario that starts hovering waits for
-its controllers). A stream that stops (or only repeats an old setpoint) costs one timeout, then the simulation
-runs on (PX4's offboard-loss failsafe plays out in simulation time). ``lockstep = False`` never waits.
+run). A live stream is waited for at every boundary until it ends the way a stream ends on PX4: the vehicle
+leaves the modes that take offboard setpoints (AUTO.LAND, AUTO.LOITER, a failsafe) or is disarmed (the bridge's
+LAND / KILL commands arrive in the same UDP burst as the missing setpoint, and the wait re-reads the emulator's
+mode after every poll). A UAV that has never streamed is not waited for (a scenario that starts hovering flies
+the held hover setpoint until its controllers take over): the pre-arming phase costs no waits and no timeouts.
+
+Watchdog: a live stream that neither delivers nor ends within ``lockstep_timeout`` wall seconds is a stalled
+graph (a dead or hung node). ``lockstep_on_timeout = "stop"`` (default) raises :class:`LockstepStalled`, one
+message naming the UAVs it waited for, instead of flying on without setpoints; ``"continue"`` counts it in
+:attr:`Simulation.lockstep_timeouts` and runs on (the stream is then no longer live, so PX4's offboard-loss
+failsafe plays out in simulation time: fault-injection runs). ``lockstep = False`` never waits.
 
 MAVLink: one :class:`~fpr_sim.px4_emulator.Px4Emulator` per UAV, as PX4 SITL instance i − 1: bound to
 127.0.0.1:(``local_base_port`` + i − 1), sending to 127.0.0.1:(``remote_base_port`` + i − 1) where the bridge
@@ -44,7 +52,11 @@ from fpr_sim.quadrotor import AttitudeCommand
 from fpr_sim.scenario import Scenario
 from fpr_sim.sensors import UavSensors
 
-__all__ = ["Simulation", "SimulationOptions"]
+__all__ = ["LockstepStalled", "Simulation", "SimulationOptions"]
+
+
+class LockstepStalled(RuntimeError):
+    """The lockstep waited ``lockstep_timeout`` wall seconds for a live setpoint stream (see the module doc)."""
 
 
 @dataclass
@@ -54,7 +66,9 @@ class SimulationOptions:
     physics_rate: float = 1000.0  #: [Hz] fixed step
     control_rate: float = 50.0  #: [Hz] controllers' period used by the lockstep
     lockstep: bool = True
-    lockstep_timeout: float = 0.5  #: [s] wall-clock wait per control period before giving up
+    #: [s] wall: the watchdog of a live setpoint stream that neither delivers nor ends (see the module doc)
+    lockstep_timeout: float = 30.0
+    lockstep_on_timeout: str = "stop"  #: "stop": raise LockstepStalled; "continue": count it and run on
     local_base_port: int = LOCAL_BASE_PORT  #: UAV i's emulator binds local_base_port + i − 1 (0: ephemeral, tests)
     remote_base_port: int = REMOTE_BASE_PORT  #: ... and sends to remote_base_port + i − 1 (0: only once contacted)
     remote_ports: tuple[int, ...] = ()  #: explicit remote port per UAV (tests); overrides remote_base_port
@@ -67,6 +81,11 @@ class Simulation:
     def __init__(self, scenario: Scenario, options: SimulationOptions | None = None) -> None:
         self.scenario = scenario
         self.options = options or SimulationOptions()
+        if self.options.lockstep_on_timeout not in ("stop", "continue"):
+            raise ValueError("lockstep_on_timeout must be 'stop' or 'continue', got "
+                             f"{self.options.lockstep_on_timeout!r}")
+        if not self.options.lockstep_timeout > 0.0:
+            raise ValueError(f"lockstep_timeout must be > 0 s, got {self.options.lockstep_timeout}")
         self.plant = Plant(scenario, dt=1.0 / self.options.physics_rate)
         n = scenario.n
         self.n = n
@@ -160,9 +179,8 @@ class Simulation:
                                      float(battery.current[i]))
 
     def _expects_setpoint(self, i: int) -> bool:
-        """Lockstep waits for UAV i: its stream is live, or it is armed in OFFBOARD and never got a setpoint."""
-        emulator = self.emulators[i]
-        return self._stream_live[i] or (emulator.armed and emulator.offboard and emulator.counters.new_setpoints == 0)
+        """Lockstep waits for UAV i: its stream is live and has not ended (see the module doc)."""
+        return self._stream_live[i] and self.emulators[i].takes_offboard_setpoints
 
     def _has_new_setpoint(self, i: int) -> bool:
         """UAV i's newest setpoint is new for the current boundary (see the module doc)."""
@@ -175,12 +193,20 @@ class Simulation:
         t = self.plant.time
         expected = [i for i in range(self.n) if self._expects_setpoint(i)]
         while True:
-            missing = [self.emulators[i] for i in expected if not self._has_new_setpoint(i)]
+            missing = [self.emulators[i] for i in expected
+                       if self.emulators[i].takes_offboard_setpoints and not self._has_new_setpoint(i)]
             if not missing:
                 break
             remaining = deadline - time.monotonic()
             if remaining <= 0.0:
                 self.lockstep_timeouts += 1
+                if self.options.lockstep_on_timeout == "stop":
+                    names = ", ".join(f"uav{e.uav_id} ({e.mode_name}, last setpoint at "
+                                      f"{'never' if e.setpoint_time_ms is None else f'{e.setpoint_time_ms} ms'})"
+                                      for e in missing)
+                    raise LockstepStalled(
+                        f"lockstep: no setpoint for t = {t:.3f} s from {names} within {self.options.lockstep_timeout:g}"
+                        " s wall: a node of the graph is dead or hung (set lockstep_on_timeout continue to fly on)")
                 break
             self.lockstep_waits += 1
             readable, _, _ = select.select(missing, [], [], min(remaining, 0.05))

@@ -50,7 +50,10 @@ class SimulatorNode(Node):
         p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
         p("lockstep", True, descriptor=_desc(
             "wait at each control period for every streaming UAV's setpoint computed for that period"))
-        p("lockstep_timeout", 0.5, descriptor=_desc("wall-clock wait per control period before giving up [s]"))
+        p("lockstep_timeout", 30.0, descriptor=_desc(
+            "[s] wall: watchdog of a live setpoint stream that neither delivers nor ends (a dead or hung node)"))
+        p("lockstep_on_timeout", "stop", descriptor=_desc(
+            "stop: stop the simulation with one error naming the UAVs; continue: count it and fly on (fault runs)"))
         p("control_rate", 50.0, descriptor=_desc("controllers' rate used by the lockstep [Hz]"))
         p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
         p("clock_rate", 250.0, descriptor=_desc("/clock publishing rate [Hz], at most 250"))
@@ -73,6 +76,7 @@ class SimulatorNode(Node):
                                     control_rate=float(get("control_rate").value),
                                     lockstep=bool(get("lockstep").value),
                                     lockstep_timeout=float(get("lockstep_timeout").value),
+                                    lockstep_on_timeout=str(get("lockstep_on_timeout").value),
                                     local_base_port=int(get("local_base_port").value),
                                     remote_base_port=int(get("remote_base_port").value))
         self.sim = Simulation(self.scenario, options)
@@ -103,6 +107,7 @@ class SimulatorNode(Node):
         self.target_period = 1.0 / self.scenario.target.rate
         self._next_target = 0.0
         self._next_truth = 0.0
+        self.last_truth_time: float | None = None
         self._next_camera = 0.0
         self._last_timeouts = 0
         self._payload_changes_logged = 0
@@ -111,7 +116,8 @@ class SimulatorNode(Node):
         self.get_logger().info(
             f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
             f"sending to {self.sim.remote_ports}, "
-            f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep}")
+            f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep} (watchdog "
+            f"{options.lockstep_timeout:g} s: {options.lockstep_on_timeout})")
         self.get_logger().info(f"plant kernel: {kernel_summary(self.sim.plant.kernel)}")
 
     # ------------------------------------------------------------------------------------------------
@@ -159,6 +165,7 @@ class SimulatorNode(Node):
         if t + 1e-9 >= self._next_truth:
             self._next_truth += self.truth_period
             self.truth_pub.publish(self._truth_message())
+            self.last_truth_time = t  #: [s] stamp of the latest /fpr/ground_truth published
         if self.cameras is not None and t + 1e-9 >= self._next_camera:
             self._next_camera += self.camera_period
             self._publish_cameras(t)
@@ -276,13 +283,21 @@ def _desc(text: str):
 
 
 def main(args=None) -> None:
+    import sys
+
+    from fpr_sim.simulation import LockstepStalled
+
     rclpy.init(args=args)
     node = None
+    status = 0
     try:
         node = SimulatorNode()
         node.run()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except LockstepStalled as error:
+        node.get_logger().error(str(error))
+        status = 1
     except Exception:
         if rclpy.ok():
             raise
@@ -292,6 +307,8 @@ def main(args=None) -> None:
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    if status:
+        sys.exit(status)
 
 
 if __name__ == "__main__":

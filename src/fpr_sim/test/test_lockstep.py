@@ -2,7 +2,9 @@
 the clients' datagrams are queued on the emulators' sockets before the simulation reaches a boundary, so what the
 lockstep sees is exact. A setpoint counts for the boundary T_k only when its time_boot_ms (the setpoint's own
 instant, on the emulated PX4's boot clock = simulation time) is later than T_{k-1} and than the setpoint that
-served T_{k-1}; time_boot_ms = 0 is stamped on arrival (scripted clients, the former behaviour)."""
+served T_{k-1}; time_boot_ms = 0 is stamped on arrival (scripted clients, the former behaviour). A live stream is
+waited for until it ends as on PX4 (LAND, LOITER, disarm); a stall is a LockstepStalled error, or with
+lockstep_on_timeout "continue" a counted timeout."""
 
 import os
 import socket
@@ -12,10 +14,16 @@ import pytest
 
 os.environ["MAVLINK20"] = "1"
 from fpr_model.frames import quat_enu_flu_to_ned_frd  # noqa: E402
-from fpr_px4_bridge.px4_protocol import import_mavlink  # noqa: E402
+from fpr_px4_bridge.px4_protocol import (  # noqa: E402
+    MAV_CMD_DO_SET_MODE,
+    Px4AutoSubMode,
+    Px4MainMode,
+    import_mavlink,
+    set_mode_params,
+)
 from fpr_sim.px4_emulator import boot_time_ms  # noqa: E402
 from fpr_sim.scenario import scenario_from_dict  # noqa: E402
-from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
+from fpr_sim.simulation import LockstepStalled, Simulation, SimulationOptions  # noqa: E402
 
 PERIOD = 0.02  # [s] control period
 TIMEOUT = 0.05  # [s] wall: the lockstep's wait (short: the tests provoke timeouts on purpose)
@@ -45,6 +53,13 @@ class Controllers:
                 thrust=float(thrust))
             self.socks[i].sendto(msg.pack(self.mavs[i]), ("127.0.0.1", self.sim.ports[i]))
 
+    def land(self, uavs=None) -> None:
+        """The bridge's LAND: DO_SET_MODE AUTO.LAND."""
+        params = set_mode_params(Px4MainMode.AUTO, Px4AutoSubMode.LAND)
+        for i in range(self.sim.n) if uavs is None else uavs:
+            msg = self.mavs[i].command_long_encode(i + 1, 1, MAV_CMD_DO_SET_MODE, 0, *params, 0.0, 0.0, 0.0, 0.0)
+            self.socks[i].sendto(msg.pack(self.mavs[i]), ("127.0.0.1", self.sim.ports[i]))
+
     def telemetry_stamps(self, kind: str) -> list[int]:
         parser = import_mavlink().MAVLink(None)
         stamps = []
@@ -64,14 +79,28 @@ class Controllers:
             sock.close()
 
 
-@pytest.fixture
-def rig():
-    """Hovering, armed in OFFBOARD (the lockstep expects every UAV from the start); no ground, no cameras."""
+def _rig(on_timeout: str):
+    """Hovering, armed in OFFBOARD; no ground, no cameras."""
     scenario = scenario_from_dict({"initial_state": {"mode": "hover", "leg_angles": 0.8, "armed": True},
                                    "ground": {"enabled": False}, "cameras": {"enabled": False}})
     sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=True,
-                                                 lockstep_timeout=TIMEOUT))
-    controllers = Controllers(sim)
+                                                 lockstep_timeout=TIMEOUT, lockstep_on_timeout=on_timeout))
+    return sim, Controllers(sim)
+
+
+@pytest.fixture
+def rig():
+    """A stalled stream is counted and the simulation flies on (lockstep_on_timeout continue)."""
+    sim, controllers = _rig("continue")
+    yield sim, controllers
+    controllers.close()
+    sim.close()
+
+
+@pytest.fixture
+def strict_rig():
+    """The default: a stalled stream stops the simulation (LockstepStalled)."""
+    sim, controllers = _rig("stop")
     yield sim, controllers
     controllers.close()
     sim.close()
@@ -151,14 +180,37 @@ def test_zero_time_boot_ms_is_stamped_on_arrival_for_scripted_clients(rig):
     assert all(e.setpoint_latency.count == 0 for e in sim.emulators)  # no stamp, no latency sample
 
 
-def test_an_armed_offboard_uav_without_any_setpoint_is_waited_for_then_not(rig):
-    sim, controllers = rig
-    sim.advance(3 * PERIOD)
-    assert sim.lockstep_timeouts == 2  # boundaries 1 and 2 (the start, t = 0, is not a boundary)
+def test_a_uav_that_never_streamed_is_not_waited_for(strict_rig):
+    """A hover start flies the held hover setpoint until its controllers take over: no waits, no timeouts (the
+    pre-arming phase of a ground start likewise)."""
+    sim, controllers = strict_rig
+    sim.advance(5 * PERIOD)
+    assert sim.lockstep_timeouts == 0 and sim.lockstep_waits == 0
     controllers.send(now_ms(sim), uavs=[0, 1])  # UAV 3's controller never starts
     sim.advance(PERIOD)
-    sim.advance(PERIOD)  # boundary 3: UAV 3 still expected (never got one); boundary 4: UAV 1, 2 not live
-    assert sim.lockstep_timeouts == 4
+    fresh_periods(sim, controllers, 3)  # UAV 3 never live, never waited for
+    assert sim.lockstep_timeouts == 0
+
+
+def test_a_stalled_stream_stops_the_simulation_with_one_error_naming_the_uav(strict_rig):
+    sim, controllers = strict_rig
+    fresh_periods(sim, controllers, 3)
+    controllers.send(now_ms(sim), uavs=[0, 2])  # UAV 2's controller dies
+    with pytest.raises(LockstepStalled, match=r"from uav2 \(OFFBOARD, last setpoint at 40 ms\) within 0.05 s wall"):
+        sim.advance(PERIOD)
+    assert sim.lockstep_timeouts == 1
+
+
+def test_land_ends_the_stream_without_a_timeout(strict_rig):
+    """The bridge's LAND arrives with the missing setpoint: the wait re-reads the mode and lets it go."""
+    sim, controllers = strict_rig
+    fresh_periods(sim, controllers, 3)
+    controllers.land(uavs=[1])
+    controllers.send(now_ms(sim), uavs=[0, 2])
+    sim.advance(PERIOD)
+    assert sim.emulators[1].mode_name == "AUTO.LAND" and not sim.emulators[1].takes_offboard_setpoints
+    fresh_periods(sim, controllers, 3)  # UAV 2 streams no more, the others do
+    assert sim.lockstep_timeouts == 0
 
 
 def test_telemetry_time_boot_ms_is_the_sample_time(rig):

@@ -1,0 +1,105 @@
+"""The whole simulated graph's speed (fpr_experiments' in-process runner): real-time factor and CPU seconds per
+simulated second, for n = 3 / 6 with emulated marker poses or rendered images + ArUco, and the levers as ratios in
+one run: the deterministic single-thread runner vs the threaded one (background executor + the simulator's
+lockstep), lean nodes (no parameter services, no default QoS event handlers) and the /clock rate. Flight: the
+takeoff_landing experiment's scenario and script for n = 3 (arm on the ground, fly, climb), steps_roll_legs for
+n = 6, ``--seconds`` simulated from the start (default 12). Run on a quiet machine, through the isolation:
+
+    bash scripts/isolated.sh python benchmarks/bench_graph.py [--seconds 12] [--cases n3_emulated,n3_images]
+
+Prints one line per case (wall, CPU, RTF, lockstep timeouts, the executor's entity count, the machine's load
+average before and after) and the ratios of each lever against the baseline of its case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import time
+
+from fpr_experiments.graph import GraphOptions, describe_graph
+from fpr_experiments.inprocess import InProcessGraph
+from fpr_experiments.recording import recorded_topics
+
+#: case -> (n, scenario, script, cameras)
+CASES = {
+    "n3_emulated": (3, "ground_start", "integration_flight", "emulated"),
+    "n3_images": (3, "ground_start", "integration_flight", "images"),
+    "n6_emulated": (6, "n6_unequal", "steps_roll_legs", "emulated"),
+    "n6_images": (6, "n6_unequal", "steps_roll_legs", "images"),
+}
+#: lever -> (deterministic runner, lean nodes, /clock rate [Hz]); the first is the baseline (main before)
+LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0),
+          "threaded, lean nodes": (False, True, 250.0),
+          "threaded, /clock 100 Hz": (False, False, 100.0),
+          "threaded, lean + /clock 100 Hz": (False, True, 100.0),
+          "deterministic, full nodes, /clock 250 Hz": (True, False, 250.0),
+          "deterministic, lean + /clock 100 Hz (default)": (True, True, 100.0)}
+
+
+def _cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _entities(graph: InProcessGraph) -> int:
+    """Entities the main executor waits on (subscriptions, timers, services, clients, QoS event handlers)."""
+    total = 0
+    for node in graph.nodes:
+        if node is graph.simulator:
+            continue
+        total += len(list(node.subscriptions)) + len(list(node.timers)) + len(list(node.services))
+        total += len(list(node.clients)) + sum(len(getattr(e, "event_handlers", [])) for e in
+                                               [*node.publishers, *node.subscriptions])
+    return total
+
+
+def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float) -> dict:
+    n, scenario, script, cameras = CASES[case]
+    model = {}
+    if n != 3:
+        from fpr_experiments.resources import MODELS
+
+        model = {"controller": {"model_file": MODELS.resolve(f"fpr_n{n}_unequal")}}
+    options = GraphOptions(n=n, mode="communicating", cameras=cameras, scenario=scenario, script=script,
+                           parameters={"simulator": {"clock_rate": clock_rate}, **model})
+    load_before = os.getloadavg()[0]
+    with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean,
+                        deterministic=deterministic) as graph:
+        graph.wait_for_discovery()
+        entities = _entities(graph)
+        wall, cpu = time.monotonic(), _cpu()
+        graph.run_until(lambda: graph.sim_time >= seconds - 1e-9, wall_timeout=60.0 + 60.0 * seconds)
+        wall, cpu = time.monotonic() - wall, _cpu() - cpu
+        simulated = graph.sim_time
+        timeouts = graph.lockstep_timeouts
+    return {"case": case, "lean": lean, "clock_rate": clock_rate, "simulated": simulated, "wall": wall, "cpu": cpu,
+            "rtf": simulated / wall, "cpu_per_sim_s": cpu / simulated, "timeouts": timeouts, "entities": entities,
+            "load": (load_before, os.getloadavg()[0])}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=12.0, help="simulated seconds per run")
+    parser.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
+    parser.add_argument("--levers", default="all", help="'all' or comma-separated lever numbers (0 = baseline)")
+    args = parser.parse_args()
+    levers = list(LEVERS.items())
+    if args.levers != "all":
+        levers = [levers[int(k)] for k in args.levers.split(",")]
+    print(f"# bench_graph: {args.seconds:.0f} s simulated per run, {os.cpu_count()} cores, load average "
+          f"{os.getloadavg()[0]:.2f}", flush=True)
+    for case in args.cases.split(","):
+        baseline = None
+        for name, (deterministic, lean, clock_rate) in levers:
+            r = run_case(case, deterministic, lean, clock_rate, args.seconds)
+            baseline = baseline or r
+            print(f"{case:12s} {name:46s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
+                  f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
+                  f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()
