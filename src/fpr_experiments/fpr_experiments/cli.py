@@ -72,7 +72,14 @@ def _write_results(names: list[str], output_root: str, path: str, command: str) 
             print(f"[results] no {metrics}: {name} left out", flush=True)
             continue
         with open(metrics, encoding="utf-8") as stream:
-            summaries.append(json.load(stream))
+            summary = json.load(stream)
+        # the realism settings of the run (each variant's metrics.json keeps its scenario's)
+        for variant in summary.get("variants", {}).values():
+            path = os.path.join(output_root, name, variant.get("report_dir", ""), "metrics.json")
+            if "realism" not in summary and os.path.exists(path):
+                with open(path, encoding="utf-8") as stream:
+                    summary["realism"] = json.load(stream).get("realism")
+        summaries.append(summary)
         experiments[name] = load_experiment(name)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w", encoding="utf-8") as stream:

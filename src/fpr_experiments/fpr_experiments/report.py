@@ -160,6 +160,18 @@ def _comparison_quantities(experiment: Experiment) -> list[str]:
     return quantities
 
 
+def _realism_text(realism: dict | None) -> str:
+    """One sentence of a run's realism settings (realism_summary), for results.md."""
+    if not realism:
+        return ""
+    plant = ", ".join(realism.get("plant_overrides") or []) or "none"
+    return (f" Realism: {realism.get('profile')}; IMU gyro noise {realism.get('imu_gyro_noise_rad_s')} rad/s, accel "
+            f"{realism.get('imu_accel_noise_m_s2')} m/s²; emulated marker pose noise "
+            f"{realism.get('camera_position_noise_m')} m / {realism.get('camera_angle_noise_rad', 0.0):.3f} rad; "
+            f"image pixel noise {realism.get('camera_pixel_noise')}; plant parameters differing from the model: "
+            f"{plant}.")
+
+
 def _fmt(value: float | None, digits: int) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
@@ -209,7 +221,7 @@ def results_markdown(summaries: list[dict[str, Any]], experiments: dict[str, Exp
         out += [f"## {summary['experiment']}: {summary['title']}", "",
                 f"{summary['thesis']}. Run: {summary['runner']}, {summary.get('cameras', '')} cameras, "
                 f"{'quick' if summary['quick'] else 'full duration'}, commit {summary['commit']}, "
-                f"{summary['date']}.", ""]
+                f"{summary['date']}." + _realism_text(summary.get("realism")), ""]
         columns = experiment.metrics
         variants = list(summary["variants"].values())
 
