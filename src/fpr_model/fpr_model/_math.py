@@ -45,3 +45,8 @@ def dot3(a, b) -> float:
 def norm3(a) -> float:
     """‖a‖ of a 3-sequence of plain floats."""
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def norm_floats(a) -> float:
+    """‖a‖ of a short vector (a sequence or 1-D array), evaluated on plain floats."""
+    return math.sqrt(sum(v * v for v in np.asarray(a, dtype=float).tolist()))

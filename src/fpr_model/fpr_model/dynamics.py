@@ -40,10 +40,11 @@ from fpr_model.geometry import (
     integrate_configuration,
     model_constants,
 )
-from fpr_model.kinematics import SingularConfigurationError, _jacobian_from
+from fpr_model.kinematics import JacobianAt, _jacobian_at, _jacobian_from
 from fpr_model.parameters import FprParameters
 
 __all__ = [
+    "ModelTerms",
     "actuation_wrench",
     "bias_forces",
     "coriolis_matrix",
@@ -54,6 +55,7 @@ __all__ = [
     "kinetic_energy",
     "mass_matrix",
     "mass_matrix_rnea",
+    "model_terms",
     "potential_energy",
     "rk4_step",
     "thrusts_from_wrench",
@@ -362,10 +364,14 @@ def _total_first_moment(params: FprParameters, parsed: ParsedConfiguration) -> n
     return c.static_first_moment + np.einsum("nij,nj->i", parsed.leg_rotations, c.leg_first_moments)
 
 
-def _gravity(params: FprParameters, parsed: ParsedConfiguration) -> np.ndarray:
+def _gravity(params: FprParameters, parsed: ParsedConfiguration,
+             first_moments: np.ndarray | None = None) -> np.ndarray:
     c = model_constants(params)
     p_g = -params.gravity * parsed.rotation[2]  # R_pᵀ g_vec (Fp)
-    h_leg = np.einsum("nij,nj->ni", parsed.leg_rotations, c.leg_first_moments)  # pR_li ms_i
+    if first_moments is None:
+        h_leg = np.einsum("nij,nj->ni", parsed.leg_rotations, c.leg_first_moments)  # pR_li ms_i
+    else:
+        h_leg = first_moments[1:]  # of _body_inertias_in_platform
     out = np.empty(6 + c.n)
     out[:2] = 0.0
     out[2] = c.total_mass * params.gravity  # f_p,g = −m_tot g_vec (2.88)
@@ -410,20 +416,35 @@ def thrusts_from_wrench(params: FprParameters, q, tau) -> np.ndarray:
     For n > 3 the minimum-norm solution ``f = (Jᵀ)^† τ = J (JᵀJ)^{-1} τ``. Raises
     SingularConfigurationError if
     ``cond(J)`` exceeds :data:`fpr_model.kinematics.CONDITION_LIMIT` (leg angles are not range-checked here).
+    See :meth:`fpr_model.kinematics.JacobianAt.thrusts` (used directly by a caller that already has J^†).
     """
-    from fpr_model.kinematics import CONDITION_LIMIT
-
     parsed = _parse_configuration(params, q)
     tau = _velocity(params, tau, "tau")
-    J = _jacobian_from(params, parsed)
-    condition = np.linalg.cond(J)
-    if not condition <= CONDITION_LIMIT:
-        raise SingularConfigurationError(f"q: J is (near) singular, cond(J) = {condition:.3g}")
-    if params.n == 3:
-        f = np.linalg.solve(J.T, tau)
-    else:
-        f = J @ np.linalg.solve(J.T @ J, tau)
-    return f.reshape(params.n, 3)
+    return _jacobian_at(params, parsed, False).thrusts(tau)
+
+
+# --------------------------------------------------------------------------------------------------------
+# All the model terms of one control step
+# --------------------------------------------------------------------------------------------------------
+class ModelTerms(NamedTuple):
+    """M(q), C(q, ν) (6+n)², g(q) (6+n) of (2.25) and J(q) (2.20) with its pseudo-inverse, at one (q, ν), in
+    the frame of q and ν (F0, or F_Fp for the decentralized controllers)."""
+
+    mass: np.ndarray
+    coriolis: np.ndarray
+    gravity: np.ndarray
+    jacobian: JacobianAt
+
+
+def model_terms(params: FprParameters, jacobian: JacobianAt, nu) -> ModelTerms:
+    """M (CRBA, :func:`mass_matrix`), C (:func:`coriolis_matrix`) and g (:func:`gravity`) at the configuration
+    of ``jacobian`` (:func:`fpr_model.kinematics.jacobian_at`) and the velocity ν (6+n,): q is parsed once and
+    the bodies' inertias in Fp are shared, instead of once per function."""
+    parsed = jacobian.configuration
+    nu = _velocity(params, nu, "nu")
+    body_terms = _body_inertias_in_platform(params, parsed)
+    return ModelTerms(_mass_matrix(params, parsed, body_terms), _coriolis_matrix(params, parsed, nu),
+                      _gravity(params, parsed, body_terms[0]), jacobian)
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -412,8 +412,8 @@ def euler_rate_matrix(roll, pitch) -> np.ndarray:
     """
     roll = as_scalar("roll", roll)
     pitch = as_scalar("pitch", pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     return np.array([[1.0, 0.0, -sp], [0.0, cr, cp * sr], [0.0, -sr, cp * cr]])
 
 
@@ -421,8 +421,8 @@ def euler_rate_matrix_inverse(roll, pitch) -> np.ndarray:
     """``D^{-1}`` of (A.80): ``η̇ = D^{-1} @ ω``; raises ValueError at the gimbal lock (cos pitch ≈ 0)."""
     roll = as_scalar("roll", roll)
     pitch = as_scalar("pitch", pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     if abs(cp) < GIMBAL_LOCK_TOLERANCE:
         raise ValueError("pitch: D is singular at pitch = ±π/2 (gimbal lock)")
     return np.array([[1.0, sr * sp / cp, cr * sp / cp], [0.0, cr, -sr], [0.0, sr / cp, cr / cp]])
@@ -434,8 +434,8 @@ def euler_rate_matrix_dot(roll, pitch, roll_rate, pitch_rate) -> np.ndarray:
     pitch = as_scalar("pitch", pitch)
     dr = as_scalar("roll_rate", roll_rate)
     dp = as_scalar("pitch_rate", pitch_rate)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     return np.array(
         [
             [0.0, 0.0, -cp * dp],
