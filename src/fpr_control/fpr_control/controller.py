@@ -324,7 +324,7 @@ class Controller:
             if not flying or not self.reference.initialized:
                 self.reference.reset(gt.platform_position, yaw)
             desired = self.reference.step(cmd, cfg.period, roll, pitch, rotation)
-            uav_yaw_frame = quat_to_euler_zyx(gt.uav_quats[own])[2]
+            uav_yaw_frame = rotmat_to_euler_zyx(quat_to_rotmat(gt.uav_quats[own]))[2]
             if uav_yaw_local is None:
                 uav_yaw_local = local.uav_yaw if local is not None else uav_yaw_frame
             applied = self._last_thrusts

@@ -143,7 +143,7 @@ class PidMotionLaw:
 
     gains: PidGains
     integral: np.ndarray = field(init=False)
-    _bound: tuple = field(init=False, repr=False, default=(None, None))  # (gains, |∫ε| bound) cache
+    _bound: tuple = field(init=False, repr=False, compare=False, default=(None, None))  # (gains, |∫ε| bound)
 
     def __post_init__(self) -> None:
         self.integral = np.zeros(len(self.gains.kp))
