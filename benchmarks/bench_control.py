@@ -2,7 +2,8 @@
 + thrust distribution + setpoint), per mode, for n = 3 and n = 6; plus the parts.
 
 Run: .venv/bin/python benchmarks/bench_control.py   (ROS-free; inserts the src/<pkg> paths itself)
-Prints median and p95 per-call times. Target: <= 1 ms per step for n = 3 (headroom for 50 Hz on a Raspberry Pi 4).
+Prints median and p95 per-call times. Targets for n = 3: <= 1 ms per step (issue 6: headroom for 50 Hz on a
+Raspberry Pi 4), <= 0.35 ms median in every mode (issue "Speed and determinism", hot paths).
 """
 
 import math
@@ -21,7 +22,7 @@ from fpr_control.laws import compute_model_terms  # noqa: E402
 from fpr_control.observers import ObserverGains, make_observer  # noqa: E402
 from fpr_control.reference import TeleopReference  # noqa: E402
 from fpr_model.dynamics import thrusts_from_wrench  # noqa: E402
-from fpr_model.kinematics import forward_kinematics, uav_velocities  # noqa: E402
+from fpr_model.kinematics import forward_kinematics, jacobian_at, uav_velocities  # noqa: E402
 from fpr_model.parameters import default_parameters  # noqa: E402
 from fpr_model.rotations import euler_zyx_to_quat  # noqa: E402
 
@@ -77,6 +78,7 @@ def bench_parts(n, repeats, reference):
     P, beta = np.ones(6 + n), np.ones(6 + n)
     parts = (
         ("  part: model terms M, C, g, J", lambda: compute_model_terms(params, q, nu)),
+        ("  part: J and J^+ once per step (jacobian_at)", lambda: jacobian_at(params, q).inverse),
         ("  part: thrusts_from_wrench (fpr_model)", lambda: thrusts_from_wrench(params, q, np.ones(6 + n))),
         ("  part: FKM forward_kinematics (fpr_model)", lambda: forward_kinematics(params, q, v)),
         ("  part: FOWO update", lambda: observer.update(P, beta, 0.02)),

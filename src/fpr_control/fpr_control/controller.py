@@ -28,8 +28,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from fpr_model.dynamics import thrusts_from_wrench
-from fpr_model.geometry import desired_uav_rotation, leg_anchor_angles, platform_to_leg_rotation
+from fpr_model._math import norm_floats
+from fpr_model._validation import all_finite
+from fpr_model.dynamics import model_terms
+from fpr_model.geometry import desired_uav_rotation, leg_anchor_angles
+from fpr_model.kinematics import jacobian_at
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
 
@@ -45,7 +48,6 @@ from fpr_control.laws import (
     ImpedanceGains,
     PidGains,
     PidMotionLaw,
-    compute_model_terms,
     configuration_error,
     control_wrench,
     impedance_acceleration,
@@ -173,9 +175,8 @@ class GroundTruth:
     uav_quats: np.ndarray  # (n, 4) [w, x, y, z], body FLU -> F0
 
     def is_finite(self) -> bool:
-        return bool(all(np.all(np.isfinite(a)) for a in (
-            self.platform_position, self.platform_quat, self.platform_velocity, self.platform_rate,
-            self.leg_angles, self.leg_rates, self.uav_quats))) and float(np.linalg.norm(self.platform_quat)) > 0.5
+        return all_finite(self.platform_position, self.platform_quat, self.platform_velocity, self.platform_rate,
+                          self.leg_angles, self.leg_rates, self.uav_quats) and norm_floats(self.platform_quat) > 0.5
 
 
 @dataclass(frozen=True)
@@ -240,7 +241,8 @@ class Controller:
         self.impedance_gains = (config.gains.impedance_centralized if use_truth
                                 else config.gains.impedance_decentralized)
         self.reference = CentralizedReference()
-        self._alphas = leg_anchor_angles(n)
+        alphas = leg_anchor_angles(n)
+        self._radial = np.array([math.cos(alphas[config.uav_id - 1]), math.sin(alphas[config.uav_id - 1]), 0.0])
         self._last_local: LocalEstimate | None = None
         self._last_thrusts: np.ndarray | None = None  # (n, 3) applied thrust vectors, controller frame
         self._last_own_thrust = hover_thrust_share(params.total_mass, params.gravity, n)
@@ -306,6 +308,7 @@ class Controller:
     def _compute(self, now, local, command, ground_truth, uav_yaw_local, active, fallback, ages, local_ok):
         cfg, n, own = self.config, self.n, self.config.uav_id - 1
         flying = command is not None and command.mode == TELEOP_MODE_FLY
+        # J(q) and J^† once per step: FKM (2.21), Jᵀ f of the observer (2.28), thrust distribution (3.32)
         if self.uses_ground_truth:
             if ground_truth is None or not ground_truth.is_finite():
                 return self._safe_output(local, active, fallback, ages, local_ok, uav_yaw_local,
@@ -314,7 +317,8 @@ class Controller:
             quat = gt.platform_quat / np.linalg.norm(gt.platform_quat)
             q = np.concatenate([gt.platform_position, quat, gt.leg_angles])
             nu = np.concatenate([gt.platform_velocity, gt.platform_rate, gt.leg_rates])
-            rotation = quat_to_rotmat(quat)
+            jacobian = jacobian_at(self.params, q, check_leg_range=False)
+            rotation = jacobian.configuration.rotation  # R_p (A.60)
             roll, pitch, yaw = rotmat_to_euler_zyx(rotation)
             cmd = self._command(command, roll, pitch, gt.leg_angles.copy())
             if not flying or not self.reference.initialized:
@@ -337,7 +341,7 @@ class Controller:
             if active != "non_communicating":
                 peers = {j: self.information.get(j) for j in range(1, n + 1) if j != cfg.uav_id}
             state = reconstruct_state(self.params, cfg.uav_id, local, peers, desired.q[7:], desired.nu)
-            q, nu = state.q, state.nu
+            q, nu, jacobian = state.q, state.nu, state.jacobian
             uav_yaw_frame = local.relative_yaw
             if uav_yaw_local is None:
                 uav_yaw_local = local.uav_yaw
@@ -351,7 +355,7 @@ class Controller:
                         applied[j - 1] = thrust_vector(peers[j].attitude, peers[j].thrust)
             use_position = False
 
-        terms = compute_model_terms(self.params, q, nu)
+        terms = model_terms(self.params, jacobian, nu)
         # ---- observer (3.8)-(3.24) / (4.35)-(4.37): paused while the others' thrusts are unknown (NC)
         if applied is None and not self.uses_ground_truth:
             self._observer_paused = True
@@ -360,7 +364,7 @@ class Controller:
                 self.observer.reset()
                 self._observer_paused = False
             # before the first command (centralized): the thrusts that hold gravity, [Jᵀ]† g
-            thrusts = applied if applied is not None else thrusts_from_wrench(self.params, q, terms.gravity)
+            thrusts = applied if applied is not None else jacobian.thrusts(terms.gravity)
             momentum, beta = observer_inputs(terms, nu, thrusts.reshape(-1))
             self.observer.update(momentum, beta, cfg.period)
         tau_hat = self.observer.estimate
@@ -373,20 +377,20 @@ class Controller:
             self.pid.reset()
         error = configuration_error(q, desired.q, use_position)
         tau = self._law(active, terms, error, nu, desired, tau_hat, flying)
-        thrusts_full = thrusts_from_wrench(self.params, q, tau)
-        if not np.all(np.isfinite(thrusts_full)):
+        thrusts_full = jacobian.thrusts(tau)  # (3.32) / (4.33)
+        if not np.isfinite(thrusts_full).all():
             raise ArithmeticError("non-finite thrusts")
 
         # ---- saturation and own setpoint (3.36)-(3.38), (4.38)
-        saturated = [saturate_thrust_vector(f, cfg.max_thrust, cfg.max_tilt) for f in thrusts_full]
-        if self.uses_ground_truth:
+        if self.uses_ground_truth:  # the saturated thrusts of every UAV are the observer's next f
+            saturated = [saturate_thrust_vector(f, cfg.max_thrust, cfg.max_tilt) for f in thrusts_full]
             self._last_thrusts = np.array([s.vector for s in saturated])
-        mine = saturated[own]
-        alpha = self._alphas[own]
-        leg_rotation = platform_to_leg_rotation(alpha, q[7 + own])
-        leg_direction = rotation @ leg_rotation[:, 0]
-        radial = rotation @ np.array([math.cos(alpha), math.sin(alpha), 0.0])
-        attitude_frame = desired_uav_rotation(mine.vector, leg_direction, self.params.joint_offset_angle, radial)
+            mine = saturated[own]
+        else:
+            mine = saturate_thrust_vector(thrusts_full[own], cfg.max_thrust, cfg.max_tilt)
+        leg_direction = rotation @ jacobian.configuration.leg_rotations[own, :, 0]  # pR_li e_x (2.8), in F
+        attitude_frame = desired_uav_rotation(mine.vector, leg_direction, self.params.joint_offset_angle,
+                                              rotation @ self._radial)
         attitude = local_frame_attitude(attitude_frame, uav_yaw_frame, uav_yaw_local)
         thrust = float(np.linalg.norm(mine.vector))
         self._last_own_thrust = thrust

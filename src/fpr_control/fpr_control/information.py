@@ -17,9 +17,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from fpr_model.kinematics import forward_kinematics, jacobian
+from fpr_model._math import norm_floats
+from fpr_model._validation import all_finite
+from fpr_model.kinematics import JacobianAt, jacobian_at
 from fpr_model.parameters import FprParameters
-from fpr_model.rotations import euler_zyx_to_quat, quat_to_rotmat
+from fpr_model.rotations import euler_zyx_to_quat, rotation_entries
 
 
 @dataclass
@@ -34,10 +36,9 @@ class PeerInfo:
 
     def problem(self) -> str | None:
         """Why this vector is unusable (non-finite, zero quaternion, negative thrust), or None."""
-        values = np.concatenate([[self.leg_angle, self.thrust], self.velocity, self.attitude])
-        if not np.all(np.isfinite(values)):
+        if not all_finite(self.leg_angle, self.thrust, self.velocity, self.attitude):
             return "contains NaN or inf"
-        if not 0.5 < float(np.linalg.norm(self.attitude)) < 1.5:
+        if not 0.5 < norm_floats(self.attitude) < 1.5:
             return "attitude is not a unit quaternion"
         if self.thrust < 0.0:
             return "negative thrust"
@@ -58,9 +59,8 @@ class LocalEstimate:
     valid: bool = True
 
     def is_finite(self) -> bool:
-        values = np.concatenate([[self.leg_angle, self.platform_roll, self.platform_pitch, self.relative_yaw,
-                                  self.uav_yaw], self.attitude, self.velocity])
-        return bool(np.all(np.isfinite(values))) and float(np.linalg.norm(self.attitude)) > 0.5
+        return all_finite(self.leg_angle, self.platform_roll, self.platform_pitch, self.relative_yaw, self.uav_yaw,
+                          self.attitude, self.velocity) and norm_floats(self.attitude) > 0.5
 
 
 class InformationTable:
@@ -108,10 +108,12 @@ class InformationTable:
         return max(now - self._own_echo_time, 0.0)
 
     def all_fresh(self, now: float) -> bool:
-        """Every peer's ζ_j (and, with ``require_own_echo``, the own echo) is at most ``timeout`` s old."""
+        """Every peer's ζ_j (and, with ``require_own_echo``, the own echo) is at most ``timeout`` s old (the
+        :meth:`ages` of all peers ≤ timeout; a peer never received has age inf)."""
         if self.require_own_echo and self.own_echo_age(now) > self.timeout:
             return False
-        return bool(np.all(self.ages(now) <= self.timeout))
+        return len(self._times) == self.n - 1 and all(max(now - t, 0.0) <= self.timeout
+                                                      for t in self._times.values())
 
     def get(self, uav_id: int) -> PeerInfo | None:
         return self._infos.get(uav_id)
@@ -123,17 +125,22 @@ def flat_platform_quat(roll: float, pitch: float) -> np.ndarray:
 
 
 def thrust_vector(attitude: np.ndarray, thrust: float) -> np.ndarray:
-    """Fp f_j = Fp R_j [0, 0, f_t,j] (4.37) [N]."""
-    return quat_to_rotmat(attitude / np.linalg.norm(attitude))[:, 2] * thrust
+    """Fp f_j = Fp R_j [0, 0, f_t,j] (4.37) [N], R_j of the normalised attitude quaternion (A.60)."""
+    w, x, y, z = np.asarray(attitude, dtype=float).tolist()
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    r = rotation_entries(w / norm, x / norm, y / norm, z / norm)
+    return np.array([r[2] * thrust, r[5] * thrust, r[8] * thrust])
 
 
 @dataclass
 class ReconstructedState:
-    """q (7+n), ν (6+n) in F_Fp and the UAV velocities used (n, 3)."""
+    """q (7+n), ν (6+n) in F_Fp, the UAV velocities used (n, 3) and J(q) with J^† (the FKM's, for the rest of
+    the control step)."""
 
     q: np.ndarray
     nu: np.ndarray
     uav_velocities: np.ndarray
+    jacobian: JacobianAt
 
 
 def reconstruct_state(params: FprParameters, own_id: int, local: LocalEstimate,
@@ -154,13 +161,14 @@ def reconstruct_state(params: FprParameters, own_id: int, local: LocalEstimate,
                 leg_angles[j - 1] = peers[j].leg_angle
     leg_angles[own] = local.leg_angle
     q = np.concatenate([np.zeros(3), flat_platform_quat(local.platform_roll, local.platform_pitch), leg_angles])
+    jacobian = jacobian_at(params, q)  # leg angles checked in (0, π/2]; cond(J) at the FKM
     velocities = np.empty((n, 3))
     if peers is None:
-        velocities[:] = (jacobian(params, q) @ desired_nu).reshape(n, 3)  # (4.32)
+        velocities[:] = (jacobian.matrix @ desired_nu).reshape(n, 3)  # (4.32)
     else:
         for j in range(1, n + 1):
             if j != own_id:
                 velocities[j - 1] = peers[j].velocity
     velocities[own] = local.velocity
-    nu = forward_kinematics(params, q, velocities)
-    return ReconstructedState(q, nu, velocities)
+    nu = jacobian.velocity(velocities.reshape(-1))  # FKM (2.21); every velocity was checked finite on receipt
+    return ReconstructedState(q, nu, velocities, jacobian)

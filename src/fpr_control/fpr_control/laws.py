@@ -1,6 +1,7 @@
 """High-level control laws of the FPR: impedance (3.25)-(3.31) / (4.33)-(4.34), PID motion law (4.27)-(4.29),
-PD and PD+C (Table 3.4), and the model terms they need. The thrust distribution ``f = [Jᵀ]† τ`` (3.32) / (4.33) is
-:func:`fpr_model.dynamics.thrusts_from_wrench`.
+PD and PD+C (Table 3.4), and the model terms they need (:class:`fpr_model.dynamics.ModelTerms`). The thrust
+distribution ``f = [Jᵀ]† τ`` (3.32) / (4.33) is :meth:`fpr_model.kinematics.JacobianAt.thrusts`
+(:func:`fpr_model.dynamics.thrusts_from_wrench`).
 
 All vectors follow fpr_model: ``q = [p_p (3), q_p (4, [w,x,y,z]), θ (n)]``, ``ν = [v_p (controller world frame,
 m/s), ω_p (Fp, rad/s), θ̇ (rad/s)]``, wrenches ``[f_p (world, N), m_p (Fp, N·m), m_l (N·m)]``. The controller
@@ -14,33 +15,24 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from fpr_model.dynamics import coriolis_matrix, gravity, mass_matrix
-from fpr_model.kinematics import jacobian
+from fpr_model.dynamics import ModelTerms, model_terms
+from fpr_model.kinematics import jacobian_at
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import attitude_error_vector
 
 from fpr_control.observers import expand_gains
 
 
-@dataclass(frozen=True)
-class ModelTerms:
-    """Model quantities at (q, ν): M (6+n)², C (6+n)², g (6+n), J (3n)×(6+n) (thesis (2.20), (2.25))."""
-
-    mass: np.ndarray
-    coriolis: np.ndarray
-    gravity: np.ndarray
-    jacobian: np.ndarray
-
-
 def compute_model_terms(params: FprParameters, q: np.ndarray, nu: np.ndarray) -> ModelTerms:
-    """M(q), C(q, ν), g(q) (2.25) and J(q) (2.20) from fpr_model, in the frame of q and ν."""
-    return ModelTerms(mass_matrix(params, q), coriolis_matrix(params, q, nu), gravity(params, q), jacobian(params, q))
+    """M(q), C(q, ν), g(q) (2.25) and J(q) (2.20) from fpr_model, in the frame of q and ν (one parse of q:
+    :func:`fpr_model.dynamics.model_terms`; J^† is computed, with its singularity test, on first use)."""
+    return model_terms(params, jacobian_at(params, q, check_leg_range=False), nu)
 
 
 def observer_inputs(terms: ModelTerms, nu: np.ndarray, thrusts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Momentum ``P = M ν`` and the known momentum rate ``β = Cᵀ ν − g + Jᵀ f`` (3.6), (2.28), for the
     observers; ``thrusts`` f (3n,) are the thrust vectors applied during the last period [N]."""
-    return terms.mass @ nu, terms.coriolis.T @ nu - terms.gravity + terms.jacobian.T @ thrusts
+    return terms.mass @ nu, terms.coriolis.T @ nu - terms.gravity + terms.jacobian.matrix.T @ thrusts
 
 
 @dataclass(frozen=True)
@@ -151,9 +143,19 @@ class PidMotionLaw:
 
     gains: PidGains
     integral: np.ndarray = field(init=False)
+    _bound: tuple = field(init=False, repr=False, compare=False, default=(None, None))  # (gains, |∫ε| bound)
 
     def __post_init__(self) -> None:
         self.integral = np.zeros(len(self.gains.kp))
+
+    def _integral_bound(self) -> np.ndarray:
+        """|∫ε| ≤ integral_limit / K_i element-wise (0 where K_i = 0: nothing to integrate), per gains object."""
+        gains, bound = self._bound
+        if gains is not self.gains:
+            g = self.gains
+            bound = np.where(g.ki > 0.0, g.integral_limit / np.where(g.ki > 0.0, g.ki, 1.0), 0.0)
+            self._bound = (g, bound)
+        return bound
 
     def reset(self) -> None:
         self.integral[:] = 0.0
@@ -165,8 +167,7 @@ class PidMotionLaw:
         if integrate and dt > 0.0:
             inside = np.abs(config_error) <= g.integral_zone
             self.integral += np.where(inside, config_error, 0.0) * dt
-            with np.errstate(divide="ignore"):
-                bound = np.where(g.ki > 0.0, g.integral_limit / np.where(g.ki > 0.0, g.ki, 1.0), 0.0)
+            bound = self._integral_bound()
             np.clip(self.integral, -bound, bound, out=self.integral)
         return nu_dot_d + g.kd * (nu_d - nu) + g.kp * config_error + g.ki * self.integral
 

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from fpr_model._validation import all_finite
 from fpr_model.rotations import euler_rate_matrix, euler_rate_matrix_dot, euler_zyx_to_quat, rot_z
 
 
@@ -50,12 +51,9 @@ class TeleopReference:
                                self.leg_angles.copy(), np.zeros(n), self.contact_force, self.mode)
 
     def is_finite(self) -> bool:
-        values = np.concatenate([
-            self.platform_velocity, self.platform_acceleration, self.leg_angles, self.leg_rates,
-            [self.yaw_rate, self.yaw_acceleration, self.roll, self.roll_rate, self.pitch, self.pitch_rate,
-             self.contact_force],
-        ])
-        return bool(np.all(np.isfinite(values)))
+        return all_finite(self.platform_velocity, self.platform_acceleration, self.leg_angles, self.leg_rates,
+                          self.yaw_rate, self.yaw_acceleration, self.roll, self.roll_rate, self.pitch,
+                          self.pitch_rate, self.contact_force)
 
 
 @dataclass
@@ -119,8 +117,9 @@ class CentralizedReference:
             raise RuntimeError("CentralizedReference.step before reset")
         yaw_rotation = rot_z(self.yaw)
         velocity = yaw_rotation @ command.platform_velocity
-        acceleration = yaw_rotation @ (command.platform_acceleration
-                                       + command.yaw_rate * np.cross([0.0, 0.0, 1.0], command.platform_velocity))
+        v = command.platform_velocity
+        e_z_cross_v = np.array([-v[1], v[0], 0.0])  # e_z × Fp v^d
+        acceleration = yaw_rotation @ (command.platform_acceleration + command.yaw_rate * e_z_cross_v)
         self.position = self.position + velocity * dt
         self.yaw = math.remainder(self.yaw + command.yaw_rate * dt, 2.0 * math.pi)
         n = len(command.leg_angles)

@@ -31,22 +31,23 @@ class SaturatedThrust:
 
 def saturate_thrust_vector(thrust_vector: np.ndarray, max_thrust: float, max_tilt: float) -> SaturatedThrust:
     """Clip the direction to ``angle(f, +z) ≤ max_tilt`` [rad] (rotating it toward +z in its vertical plane,
-    magnitude kept), then the magnitude to ``[0, max_thrust]`` [N]. A zero or non-finite vector gives 0."""
-    f = np.asarray(thrust_vector, dtype=float)
-    magnitude = float(np.linalg.norm(f))
+    magnitude kept), then the magnitude to ``[0, max_thrust]`` [N]. A zero or non-finite vector gives 0.
+    Evaluated on plain floats (one 3-vector)."""
+    fx, fy, fz = np.asarray(thrust_vector, dtype=float).tolist()
+    magnitude = math.sqrt(fx * fx + fy * fy + fz * fz)
     if not math.isfinite(magnitude) or magnitude < 1e-9:
         return SaturatedThrust(np.zeros(3), False, False)
-    direction = f / magnitude
+    direction = (fx / magnitude, fy / magnitude, fz / magnitude)
     tilt_saturated = False
     if direction[2] < math.cos(max_tilt):
-        horizontal = direction[:2]
-        h_norm = float(np.linalg.norm(horizontal))
-        azimuth = horizontal / h_norm if h_norm > 1e-12 else np.array([1.0, 0.0])
-        direction = np.array([azimuth[0] * math.sin(max_tilt), azimuth[1] * math.sin(max_tilt), math.cos(max_tilt)])
+        h_norm = math.hypot(direction[0], direction[1])
+        azimuth = (direction[0] / h_norm, direction[1] / h_norm) if h_norm > 1e-12 else (1.0, 0.0)
+        direction = (azimuth[0] * math.sin(max_tilt), azimuth[1] * math.sin(max_tilt), math.cos(max_tilt))
         tilt_saturated = True
     thrust_saturated = magnitude > max_thrust
     magnitude = min(magnitude, max_thrust)
-    return SaturatedThrust(direction * magnitude, thrust_saturated, tilt_saturated)
+    return SaturatedThrust(np.array([direction[0] * magnitude, direction[1] * magnitude, direction[2] * magnitude]),
+                           thrust_saturated, tilt_saturated)
 
 
 def local_frame_attitude(rotation_in_frame: np.ndarray, uav_yaw_in_frame: float, uav_yaw_local: float) -> np.ndarray:

@@ -6,6 +6,8 @@ these helpers, so that a wrong shape or a NaN/inf raises a ``ValueError`` that n
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -70,3 +72,17 @@ def as_vector(name: str, value, min_size: int = 0) -> np.ndarray:
     if not np.isfinite(array).all():
         raise ValueError(f"{name}: contains NaN or inf")
     return array
+
+
+def all_finite(*values) -> bool:
+    """True when every value (a real number, or an array or sequence of them) is finite; no exception.
+
+    The per-cycle check of a small message's fields: Python floats are tested with ``math.isfinite`` (a numpy
+    call per field would cost about 1 µs)."""
+    for value in values:
+        if isinstance(value, float | int):
+            if not math.isfinite(value):
+                return False
+        elif not all(map(math.isfinite, np.asarray(value, dtype=float).ravel().tolist())):
+            return False
+    return True

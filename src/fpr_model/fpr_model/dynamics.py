@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fpr_model._math import cross, skew_batch
+from fpr_model._math import cross, cross3, skew_batch
 from fpr_model._validation import as_array, as_scalar
 from fpr_model.geometry import (
     ParsedConfiguration,
@@ -40,10 +40,11 @@ from fpr_model.geometry import (
     integrate_configuration,
     model_constants,
 )
-from fpr_model.kinematics import SingularConfigurationError, _jacobian_from
+from fpr_model.kinematics import JacobianAt, _jacobian_at, _jacobian_from
 from fpr_model.parameters import FprParameters
 
 __all__ = [
+    "ModelTerms",
     "actuation_wrench",
     "bias_forces",
     "coriolis_matrix",
@@ -54,6 +55,7 @@ __all__ = [
     "kinetic_energy",
     "mass_matrix",
     "mass_matrix_rnea",
+    "model_terms",
     "potential_energy",
     "rk4_step",
     "thrusts_from_wrench",
@@ -142,7 +144,7 @@ def _body_inertias_in_platform(params: FprParameters,
     Rl = parsed.leg_rotations
     first = np.empty((c.n + 1, 3))
     first[0] = c.platform_first_moment
-    first[1:] = np.einsum("nij,nj->ni", Rl, c.leg_first_moments)
+    first[1:] = (Rl @ c.leg_first_moments[:, :, None])[:, :, 0]
     inertia = np.empty((c.n + 1, 3, 3))
     inertia[0] = params.platform_inertia
     inertia[1:] = Rl @ c.leg_inertias @ np.swapaxes(Rl, 1, 2)
@@ -255,10 +257,10 @@ def _mass_matrix(params: FprParameters, parsed: ParsedConfiguration,
     M[:3, 3:6] = M_omega_v.T
     M[3:6, 3:6] = inertia_c
     # Leg columns S_pᵀ pX*_i I_i S_i (2.63): momentum of leg i per unit θ̇_i, moved to P.
-    angular = np.einsum("nij,nj->ni", inertia[1:], c.joint_axes)  # pR_li I_i e_z
-    linear = cross(c.joint_axes, first[1:])  # k_i × h_i
+    angular = (inertia[1:] @ c.joint_axes[:, :, None])[:, :, 0]  # pR_li I_i e_z
+    linear = (b.axes_skew[1:] @ first[1:, :, None])[:, :, 0]  # k_i × h_i
     M[:3, 6:] = R @ linear.T
-    M[3:6, 6:] = (angular + cross(c.anchors, linear)).T
+    M[3:6, 6:] = (angular + (c.anchors_skew @ linear[:, :, None])[:, :, 0]).T  # + a_i × (k_i × h_i)
     M[6:, :6] = M[:6, 6:].T
     return M
 
@@ -303,7 +305,8 @@ def _body_jacobians(params: FprParameters, parsed: ParsedConfiguration, nu: np.n
     # Ψ̇ = −θ̇ (S×) Ψ + E-block of Ṡ_p, with Ṡ_p = [[0, 0], [−[ω]x R_pᵀ, 0]].
     Psi_dot = np.zeros((n + 1, 6, 6))
     Psi_dot[1:] = (-nu[6:])[:, None, None] * (_JOINT_CROSS @ Psi[1:])
-    omega_skew_rt = skew_batch(omega) @ R.T
+    wx, wy, wz = omega.tolist()
+    omega_skew_rt = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]]) @ R.T  # [ω]x R_pᵀ
     Psi_dot[0, 3:, :3] = -omega_skew_rt
     Psi_dot[1:, 3:, :3] -= E @ omega_skew_rt
     velocity = Psi @ nu[:6]
@@ -319,20 +322,19 @@ def _coriolis_matrix(params: FprParameters, parsed: ParsedConfiguration, nu: np.
         inertia = np.concatenate([c.platform_spatial_inertia[None], c.leg_spatial_inertias])
         params._cache["spatial_inertias"] = inertia
     Psi, Psi_dot, velocity = _body_jacobians(params, parsed, nu)
-    momentum = np.einsum("kij,kj->ki", inertia, velocity)  # [μ; p]
+    momentum = (inertia @ velocity[:, :, None])[:, :, 0]  # [μ; p]
     # B = (I V) x̄* = −[[ [μ]x, [p]x ], [ [p]x, 0 ]]  (2.70): skew-symmetric, B V = V x* (I V).
-    mu_skew = skew_batch(momentum[:, :3])
-    p_skew = skew_batch(momentum[:, 3:])
+    minus_skew = skew_batch(-momentum.reshape(n + 1, 2, 3))  # −[μ]x, −[p]x
     B = np.zeros((n + 1, 6, 6))
-    B[:, :3, :3] = -mu_skew
-    B[:, :3, 3:] = -p_skew
-    B[:, 3:, :3] = -p_skew
+    B[:, :3, :3] = minus_skew[:, 0]
+    B[:, :3, 3:] = minus_skew[:, 1]
+    B[:, 3:, :3] = minus_skew[:, 1]
     P = inertia @ Psi_dot + B @ Psi  # I_k J̇_k + B_k J_k restricted to the platform columns
     C = np.zeros((6 + n, 6 + n))
-    C[:6, :6] = np.einsum("kji,kjl->il", Psi, P)
+    C[:6, :6] = Psi.reshape(-1, 6).T @ P.reshape(-1, 6)  # Σ_k Ψ_kᵀ P_k
     # Leg columns: Ψ_iᵀ B_i S, with B_i S = [e_z × μ; e_z × p] (the joint column of J̇_i is zero).
     BS = B[1:, :, 2]
-    C[:6, 6:] = np.einsum("kji,kj->ik", Psi[1:], BS)
+    C[:6, 6:] = (BS[:, None, :] @ Psi[1:])[:, 0, :].T
     C[6:, :6] = P[1:, 2, :]
     # C[6+i, 6+i] = Sᵀ B_i S = 0 (B_i skew-symmetric).
     return C
@@ -362,18 +364,22 @@ def _total_first_moment(params: FprParameters, parsed: ParsedConfiguration) -> n
     return c.static_first_moment + np.einsum("nij,nj->i", parsed.leg_rotations, c.leg_first_moments)
 
 
-def _gravity(params: FprParameters, parsed: ParsedConfiguration) -> np.ndarray:
+def _gravity(params: FprParameters, parsed: ParsedConfiguration,
+             first_moments: np.ndarray | None = None) -> np.ndarray:
     c = model_constants(params)
     p_g = -params.gravity * parsed.rotation[2]  # R_pᵀ g_vec (Fp)
-    h_leg = np.einsum("nij,nj->ni", parsed.leg_rotations, c.leg_first_moments)  # pR_li ms_i
+    if first_moments is None:
+        h_leg = np.einsum("nij,nj->ni", parsed.leg_rotations, c.leg_first_moments)  # pR_li ms_i
+    else:
+        h_leg = first_moments[1:]  # of _body_inertias_in_platform
     out = np.empty(6 + c.n)
     out[:2] = 0.0
     out[2] = c.total_mass * params.gravity  # f_p,g = −m_tot g_vec (2.88)
     # p_m_p,g = −(m_p s_p × p_g + Σ [pR_li (ms_i × li_g) + r p_r_i × m_i p_g]) (2.90, E2)
     #         = −h_total × p_g, h_total = m_p s_p + Σ (m_i a_i + pR_li ms_i).
-    out[3:6] = -cross(c.static_first_moment + h_leg.sum(axis=0), p_g)
-    # m_i,g = −e_zᵀ (ms_i × li_g) = −k_i · (pR_li ms_i × p_g)  (2.91)
-    out[6:] = -np.einsum("ni,ni->n", c.joint_axes, cross(h_leg, p_g))
+    out[3:6] = cross3(p_g.tolist(), (c.static_first_moment + h_leg.sum(axis=0)).tolist())
+    # m_i,g = −e_zᵀ (ms_i × li_g) = −k_i · (pR_li ms_i × p_g) = −(k_i × pR_li ms_i) · p_g  (2.91)
+    out[6:] = -((_body_constants(params).axes_skew[1:] @ h_leg[:, :, None])[:, :, 0] @ p_g)
     return out
 
 
@@ -410,20 +416,35 @@ def thrusts_from_wrench(params: FprParameters, q, tau) -> np.ndarray:
     For n > 3 the minimum-norm solution ``f = (Jᵀ)^† τ = J (JᵀJ)^{-1} τ``. Raises
     SingularConfigurationError if
     ``cond(J)`` exceeds :data:`fpr_model.kinematics.CONDITION_LIMIT` (leg angles are not range-checked here).
+    See :meth:`fpr_model.kinematics.JacobianAt.thrusts` (used directly by a caller that already has J^†).
     """
-    from fpr_model.kinematics import CONDITION_LIMIT
-
     parsed = _parse_configuration(params, q)
     tau = _velocity(params, tau, "tau")
-    J = _jacobian_from(params, parsed)
-    condition = np.linalg.cond(J)
-    if not condition <= CONDITION_LIMIT:
-        raise SingularConfigurationError(f"q: J is (near) singular, cond(J) = {condition:.3g}")
-    if params.n == 3:
-        f = np.linalg.solve(J.T, tau)
-    else:
-        f = J @ np.linalg.solve(J.T @ J, tau)
-    return f.reshape(params.n, 3)
+    return _jacobian_at(params, parsed, False).thrusts(tau)
+
+
+# --------------------------------------------------------------------------------------------------------
+# All the model terms of one control step
+# --------------------------------------------------------------------------------------------------------
+class ModelTerms(NamedTuple):
+    """M(q), C(q, ν) (6+n)², g(q) (6+n) of (2.25) and J(q) (2.20) with its pseudo-inverse, at one (q, ν), in
+    the frame of q and ν (F0, or F_Fp for the decentralized controllers)."""
+
+    mass: np.ndarray
+    coriolis: np.ndarray
+    gravity: np.ndarray
+    jacobian: JacobianAt
+
+
+def model_terms(params: FprParameters, jacobian: JacobianAt, nu) -> ModelTerms:
+    """M (CRBA, :func:`mass_matrix`), C (:func:`coriolis_matrix`) and g (:func:`gravity`) at the configuration
+    of ``jacobian`` (:func:`fpr_model.kinematics.jacobian_at`) and the velocity ν (6+n,): q is parsed once and
+    the bodies' inertias in Fp are shared, instead of once per function."""
+    parsed = jacobian.configuration
+    nu = _velocity(params, nu, "nu")
+    body_terms = _body_inertias_in_platform(params, parsed)
+    return ModelTerms(_mass_matrix(params, parsed, body_terms), _coriolis_matrix(params, parsed, nu),
+                      _gravity(params, parsed, body_terms[0]), jacobian)
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -10,14 +10,15 @@ Velocity ``ν ∈ R^{6+n} = [v_p (3, world, m/s), ω_p (3, platform frame Fp, ra
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
-from fpr_model._math import cross, skew_batch
+from fpr_model._math import cross, cross3, dot3, norm3, skew_batch
 from fpr_model._validation import as_array, as_scalar, as_vector
 from fpr_model.parameters import FprParameters, leg_mass_properties
-from fpr_model.rotations import _quat_integrate_rotvec, _quat_to_rotmat, quat_from_axis_angle
+from fpr_model.rotations import _quat_integrate_rotvec, _quat_to_rotmat, rotation_entries
 
 __all__ = [
     "Configuration",
@@ -200,11 +201,7 @@ def _parse_configuration(params: FprParameters, q, name: str = "q") -> ParsedCon
     if norm2 != 1.0:
         scale = norm2 ** -0.5
         w, x, y, z = w * scale, x * scale, y * scale, z * scale
-    rotation = np.array([
-        [w * w + x * x - y * y - z * z, 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-        [2.0 * (x * y + w * z), w * w - x * x + y * y - z * z, 2.0 * (y * z - w * x)],
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), w * w - x * x - y * y + z * z],
-    ])  # (A.60) on plain floats: every model function parses q; rotations._quat_to_rotmat costs ~8 µs more here
+    rotation = np.array(rotation_entries(w, x, y, z)).reshape(3, 3)  # (A.60) on plain floats
     theta = q[7:]
     basis = constants.leg_rotation_basis
     leg_rotations = (np.cos(theta)[:, None, None] * basis[0] + np.sin(theta)[:, None, None] * basis[1]
@@ -314,20 +311,33 @@ def desired_uav_rotation(thrust_vector: np.ndarray, leg_direction: np.ndarray, b
     R^d_i = [x^d, z^d × x^d, z^d] (3.38) with z^d = f_i/‖f_i‖ (3.36) and (3.37) (erratum E12: columns):
     ``x' = l_i × z^d`` (normalised), ``x^d = AxisAngle(z^d, β − π/2) x'``; l_i = unit A_i -> B_i in F.
     This puts x^d at the signed angle +β about z^d from the horizontal projection of −l_i (spec §1.7).
+    The axis-angle rotation is Rodrigues' formula (A.58, erratum E13), on plain floats (3-vectors).
 
     If l_i ∥ z^d the rule is undefined; then ``fallback_radial`` (the outward leg anchor direction, or x of F)
     replaces l_i. A zero thrust vector gives z^d = +z."""
-    f = np.asarray(thrust_vector, dtype=float)
-    norm = float(np.linalg.norm(f))
-    z_axis = f / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
-    x_prime = np.cross(leg_direction, z_axis)
-    if np.linalg.norm(x_prime) < 1e-6:
-        radial = fallback_radial if fallback_radial is not None else np.array([1.0, 0.0, 0.0])
-        x_prime = np.cross(radial, z_axis)
-        if np.linalg.norm(x_prime) < 1e-6:
-            x_prime = np.cross(np.array([0.0, 1.0, 0.0]), z_axis)
-    x_prime /= np.linalg.norm(x_prime)
-    x_axis = _quat_to_rotmat(quat_from_axis_angle(z_axis, beta - 0.5 * np.pi)) @ x_prime
-    x_axis -= z_axis * float(x_axis @ z_axis)  # remove round-off
-    x_axis /= np.linalg.norm(x_axis)
-    return np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])
+    f = np.asarray(thrust_vector, dtype=float).tolist()
+    norm = norm3(f)
+    z_axis = (f[0] / norm, f[1] / norm, f[2] / norm) if norm > 1e-9 else (0.0, 0.0, 1.0)
+    x_prime = cross3(np.asarray(leg_direction, dtype=float).tolist(), z_axis)
+    if norm3(x_prime) < 1e-6:
+        radial = (np.asarray(fallback_radial, dtype=float).tolist() if fallback_radial is not None
+                  else (1.0, 0.0, 0.0))
+        x_prime = cross3(radial, z_axis)
+        if norm3(x_prime) < 1e-6:
+            x_prime = cross3((0.0, 1.0, 0.0), z_axis)
+    norm = norm3(x_prime)
+    x_prime = (x_prime[0] / norm, x_prime[1] / norm, x_prime[2] / norm)
+    # (A.58): x = cos φ x' + sin φ (z × x') + (1 − cos φ)(z · x') z, φ = β − π/2
+    angle = beta - 0.5 * math.pi
+    c, s = math.cos(angle), math.sin(angle)
+    zx = cross3(z_axis, x_prime)
+    along = (1.0 - c) * dot3(z_axis, x_prime)
+    x_axis = [c * x_prime[k] + s * zx[k] + along * z_axis[k] for k in range(3)]
+    along = dot3(x_axis, z_axis)  # remove round-off
+    x_axis = [x_axis[k] - z_axis[k] * along for k in range(3)]
+    norm = norm3(x_axis)
+    x_axis = (x_axis[0] / norm, x_axis[1] / norm, x_axis[2] / norm)
+    y_axis = cross3(z_axis, x_axis)
+    return np.array([[x_axis[0], y_axis[0], z_axis[0]],
+                     [x_axis[1], y_axis[1], z_axis[1]],
+                     [x_axis[2], y_axis[2], z_axis[2]]])

@@ -6,6 +6,10 @@ IKM ``v = J(q) ν`` (2.20): ``v = [v_1; ...; v_n]`` quadrotor CoM velocities (wo
 
 J is singular when a leg lies in the platform plane (θ_i = 0) and regular on (0, π/2] (Six 2018; spec §1.2).
 The forward models refuse configurations outside that range or with ``cond(J) > CONDITION_LIMIT``.
+
+:class:`JacobianAt` holds J at one configuration and, on first use, its pseudo-inverse J^† with that check: a
+control step builds it once and uses it for the FKM (2.21), the actuation wrench (2.28) and the thrust
+distribution (3.32) of the same configuration, instead of recomputing J (and its SVD) in each.
 """
 
 from __future__ import annotations
@@ -19,11 +23,13 @@ from fpr_model.parameters import FprParameters
 
 __all__ = [
     "CONDITION_LIMIT",
+    "JacobianAt",
     "SingularConfigurationError",
     "check_regular_configuration",
     "forward_acceleration",
     "forward_kinematics",
     "jacobian",
+    "jacobian_at",
     "jacobian_dot",
     "uav_accelerations",
     "uav_velocities",
@@ -105,32 +111,112 @@ def uav_accelerations(params: FprParameters, q, nu, nu_dot) -> np.ndarray:
     return (J @ nu_dot + jacobian_dot(params, q, nu) @ nu).reshape(-1, 3)
 
 
+def _check_leg_range(parsed: ParsedConfiguration) -> None:
+    angles = parsed.leg_angles
+    bad = np.flatnonzero((angles <= 0.0) | (angles > 0.5 * np.pi))
+    if bad.size:
+        raise SingularConfigurationError(
+            f"q: leg angle(s) {angles[bad].tolist()} rad of leg(s) {(bad + 1).tolist()} outside (0, pi/2]"
+        )
+
+
+def _check_condition(J: np.ndarray) -> float:
+    """cond(J) (2-norm, by SVD); SingularConfigurationError when it exceeds :data:`CONDITION_LIMIT`."""
+    condition = float(np.linalg.cond(J))
+    if not condition <= CONDITION_LIMIT:
+        raise SingularConfigurationError(f"q: J is (near) singular, cond(J) = {condition:.3g}")
+    return condition
+
+
+def _frobenius(a: np.ndarray) -> float:
+    flat = a.ravel()
+    return float(np.dot(flat, flat)) ** 0.5
+
+
+def _pseudo_inverse(J: np.ndarray) -> np.ndarray:
+    """J^† of a regular J: J^{-1} (LU) for n = 3, ``R^{-1} Qᵀ`` from the reduced QR ``J = Q R`` (the
+    least-squares pseudo-inverse, = (JᵀJ)^{-1} Jᵀ) for n > 3. SingularConfigurationError when
+    ``cond(J) > CONDITION_LIMIT``.
+
+    The test needs no SVD in the regular case: ``cond(J) = ‖J‖₂ ‖J^†‖₂ ≤ ‖J‖_F ‖J^†‖_F`` (the 2-norm is at most
+    the Frobenius norm), so ``‖J‖_F ‖J^†‖_F ≤ CONDITION_LIMIT`` proves ``cond(J) ≤ CONDITION_LIMIT``. Only when
+    that bound fails (it exceeds cond(J) by at most a factor 6 + n, so only near a singularity) is cond(J)
+    computed exactly. The accepted configurations are therefore exactly those of ``np.linalg.cond(J) ≤
+    CONDITION_LIMIT``, as in :func:`check_regular_configuration`."""
+    try:
+        if J.shape[0] == J.shape[1]:
+            inverse = np.linalg.inv(J)
+        else:
+            Q, R = np.linalg.qr(J)
+            inverse = np.linalg.solve(R, Q.T)
+    except np.linalg.LinAlgError:
+        inverse = None
+    if inverse is None or not _frobenius(J) * _frobenius(inverse) <= CONDITION_LIMIT:
+        _check_condition(J)
+        if inverse is None:  # exactly singular in floating point although cond(J) rounds below the limit
+            raise SingularConfigurationError("q: J is singular")
+    return inverse
+
+
+class JacobianAt:
+    """J(q) (2.20) at one configuration and its pseudo-inverse J^† (computed, with the singularity test of
+    :func:`check_regular_configuration` on cond(J), on first use of :attr:`inverse`).
+
+    Attributes: ``configuration`` (the parsed q), ``matrix`` J ∈ R^{3n×(6+n)} (world rows, ν columns)."""
+
+    __slots__ = ("configuration", "matrix", "_inverse")
+
+    def __init__(self, configuration: ParsedConfiguration, matrix: np.ndarray) -> None:
+        self.configuration = configuration
+        self.matrix = matrix
+        self._inverse: np.ndarray | None = None
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """J^† ∈ R^{(6+n)×3n}: J^{-1} for n = 3, the least-squares pseudo-inverse for n > 3 (J has full column
+        rank). Raises SingularConfigurationError when ``cond(J) > CONDITION_LIMIT``."""
+        if self._inverse is None:
+            self._inverse = _pseudo_inverse(self.matrix)
+        return self._inverse
+
+    def velocity(self, uav_velocities: np.ndarray) -> np.ndarray:
+        """FKM (2.21): ``ν = J^† v`` from v = [v_1; …; v_n] (3n,) [m/s, world]; ν (6+n,) (unchecked input)."""
+        return self.inverse @ uav_velocities
+
+    def thrusts(self, tau: np.ndarray) -> np.ndarray:
+        """Thrust distribution (3.32): ``f = (Jᵀ)^† τ = (J^†)ᵀ τ`` (n = 3: J^{-T} τ; n > 3: the minimum-norm
+        f with ``Jᵀ f = τ`` (2.28)), τ (6+n,) [N, N·m] in the wrench layout; f (n, 3) [N, world]."""
+        return (tau @ self.inverse).reshape(-1, 3)
+
+
+def _jacobian_at(params: FprParameters, parsed: ParsedConfiguration, check_leg_range: bool) -> JacobianAt:
+    if check_leg_range:
+        _check_leg_range(parsed)
+    return JacobianAt(parsed, _jacobian_from(params, parsed))
+
+
+def jacobian_at(params: FprParameters, q, check_leg_range: bool = True) -> JacobianAt:
+    """:class:`JacobianAt` for q (7+n,); SingularConfigurationError at once if ``check_leg_range`` and a leg angle
+    is outside (0, π/2], and on the first use of J^† if ``cond(J) > CONDITION_LIMIT``."""
+    return _jacobian_at(params, _parse_configuration(params, q), check_leg_range)
+
+
 def check_regular_configuration(params: FprParameters, q, J: np.ndarray | None = None,
                                 check_leg_range: bool = True) -> float:
     """Raise SingularConfigurationError if a leg angle is outside (0, π/2] (when ``check_leg_range``) or
     ``cond(J) > CONDITION_LIMIT``; return cond(J) otherwise."""
     parsed = _parse_configuration(params, q)
     if check_leg_range:
-        angles = parsed.leg_angles
-        bad = np.flatnonzero((angles <= 0.0) | (angles > 0.5 * np.pi))
-        if bad.size:
-            raise SingularConfigurationError(
-                f"q: leg angle(s) {angles[bad].tolist()} rad of leg(s) {(bad + 1).tolist()} outside (0, pi/2]"
-            )
-    if J is None:
-        J = _jacobian_from(params, parsed)
-    condition = float(np.linalg.cond(J))
-    if not condition <= CONDITION_LIMIT:
-        raise SingularConfigurationError(
-            f"q: J is (near) singular, cond(J) = {condition:.3g} > {CONDITION_LIMIT:g}"
-        )
-    return condition
+        _check_leg_range(parsed)
+    return _check_condition(_jacobian_from(params, parsed) if J is None else J)
 
 
-def _solve_jacobian(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    if J.shape[0] == J.shape[1]:
-        return np.linalg.solve(J, rhs)
-    return np.linalg.lstsq(J, rhs, rcond=None)[0]  # J^† rhs (least squares, J has full column rank)
+def _stacked(params: FprParameters, name: str, value) -> np.ndarray:
+    """(n, 3) or (3n,) quadrotor vectors as a checked (3n,) array."""
+    size = 3 * params.n
+    if np.size(value) != size:
+        raise ValueError(f"{name}: expected {params.n}x3 values, got shape {np.shape(value)}")
+    return as_array(name, np.asarray(value, dtype=float).reshape(-1), (size,))
 
 
 def forward_kinematics(params: FprParameters, q, uav_velocities, check_leg_range: bool = True) -> np.ndarray:
@@ -140,15 +226,8 @@ def forward_kinematics(params: FprParameters, q, uav_velocities, check_leg_range
     near singular configurations (see :func:`check_regular_configuration`).
     """
     parsed = _parse_configuration(params, q)
-    J = _jacobian_from(params, parsed)
-    v = np.asarray(uav_velocities, dtype=float).reshape(-1) if np.size(uav_velocities) == J.shape[0] else None
-    if v is None:
-        raise ValueError(
-            f"uav_velocities: expected {J.shape[0] // 3}x3 values, got shape {np.shape(uav_velocities)}"
-        )
-    v = as_array("uav_velocities", v, (J.shape[0],))
-    check_regular_configuration(params, q, J, check_leg_range)
-    return _solve_jacobian(J, v)
+    v = _stacked(params, "uav_velocities", uav_velocities)
+    return _jacobian_at(params, parsed, check_leg_range).velocity(v)
 
 
 def forward_acceleration(params: FprParameters, q, nu, uav_accelerations,
@@ -156,12 +235,6 @@ def forward_acceleration(params: FprParameters, q, nu, uav_accelerations,
     """Second-order FKM (2.24): ``ν̇ = J^† (v̇ − J̇ ν)``, quadrotor accelerations (n, 3) or (3n,), world,
     m/s²."""
     parsed = _parse_configuration(params, q)
-    J = _jacobian_from(params, parsed)
-    nu = as_array("nu", nu, (J.shape[1],))
-    if np.size(uav_accelerations) != J.shape[0]:
-        raise ValueError(
-            f"uav_accelerations: expected {J.shape[0] // 3}x3 values, got shape {np.shape(uav_accelerations)}"
-        )
-    a = as_array("uav_accelerations", np.asarray(uav_accelerations, dtype=float).reshape(-1), (J.shape[0],))
-    check_regular_configuration(params, q, J, check_leg_range)
-    return _solve_jacobian(J, a - jacobian_dot(params, q, nu) @ nu)
+    nu = as_array("nu", nu, (6 + params.n,))
+    a = _stacked(params, "uav_accelerations", uav_accelerations)
+    return _jacobian_at(params, parsed, check_leg_range).velocity(a - jacobian_dot(params, q, nu) @ nu)

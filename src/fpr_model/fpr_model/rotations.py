@@ -14,9 +14,16 @@ E16 (ZXZ from matrix entries), E17 (det R = +1).
 
 Most functions accept leading batch dimensions (``(..., 4)`` quaternions, ``(..., 3, 3)`` matrices);
 the documented signatures are the scalar ones.
+
+Each formula is written once, as a kernel on components (``_hamilton``, :func:`rotation_entries`,
+``_euler_zyx_quat``, ``_euler_zyx_angles``) that works on plain floats as on numpy arrays: a single quaternion,
+vector or angle is evaluated on Python floats (numpy costs about 1 µs per call on 4-vectors, the float
+arithmetic tens of ns: these run several times per control step and per simulator step), a batch on arrays.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -52,6 +59,7 @@ __all__ = [
     "rot_z",
     "rotmat_to_euler_zxz",
     "rotmat_to_euler_zyx",
+    "rotation_entries",
     "rotmat_to_quat",
     "skew",
 ]
@@ -103,18 +111,31 @@ def rot_z(a) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------
 # Quaternion algebra
 # --------------------------------------------------------------------------------------------------------
-def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
+def _components(a: np.ndarray) -> list:
+    """The last-axis components of ``a``: Python floats for one vector, arrays over the batch otherwise."""
+    if a.ndim == 1:
+        return a.tolist()
+    return [a[..., k] for k in range(a.shape[-1])]
+
+
+def _assemble(components, batched: bool) -> np.ndarray:
+    """Inverse of :func:`_components`: stack the components on the last axis."""
+    return np.stack(components, axis=-1) if batched else np.array(components)
+
+
+def _hamilton(aw, ax, ay, az, bw, bx, by, bz) -> tuple:
+    """Components of the Hamilton product ``a ∘ b`` (A.48) (floats or arrays)."""
+    return (aw * bw - ax * bx - ay * by - az * bz,
             aw * bx + ax * bw + ay * bz - az * by,
             aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    batched = a.ndim > 1 or b.ndim > 1
+    if batched:
+        a, b = np.broadcast_arrays(a, b)
+    return _assemble(_hamilton(*_components(a), *_components(b)), batched)
 
 
 def quat_multiply(a, b) -> np.ndarray:
@@ -158,18 +179,22 @@ def quat_rotate(q, v) -> np.ndarray:
     return v + q[..., :1] * t + np.cross(u, t)
 
 
+def rotation_entries(w, x, y, z) -> tuple:
+    """Row-major entries ``(r00, r01, …, r22)`` of the rotation matrix of the quaternion ``[w, x, y, z]``
+    (A.60), body -> world, the quaternion used as given (not normalised). Plain floats (or arrays of them):
+    the kernel of :func:`quat_to_rotmat`, for callers that want the entries, not a matrix."""
+    return (w * w + x * x - y * y - z * z, 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), w * w - x * x + y * y - z * z, 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), w * w - x * x - y * y + z * z)
+
+
 def _quat_to_rotmat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    entries = rotation_entries(*_components(q))
+    if q.ndim == 1:
+        return np.array(entries).reshape(3, 3)
     out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = w * w + x * x - y * y - z * z
-    out[..., 0, 1] = 2.0 * (x * y - w * z)
-    out[..., 0, 2] = 2.0 * (x * z + w * y)
-    out[..., 1, 0] = 2.0 * (x * y + w * z)
-    out[..., 1, 1] = w * w - x * x + y * y - z * z
-    out[..., 1, 2] = 2.0 * (y * z - w * x)
-    out[..., 2, 0] = 2.0 * (x * z - w * y)
-    out[..., 2, 1] = 2.0 * (y * z + w * x)
-    out[..., 2, 2] = w * w - x * x - y * y + z * z
+    for k, entry in enumerate(entries):
+        out[..., k // 3, k % 3] = entry
     return out
 
 
@@ -275,23 +300,29 @@ def quat_to_rotvec(q) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------
 # Euler angles
 # --------------------------------------------------------------------------------------------------------
+def _euler_zyx_quat(cr, sr, cp, sp, cy, sy) -> tuple:
+    """Components of ``qz(yaw) ∘ qy(pitch) ∘ qx(roll)`` (A.67)-(A.71) from the cosines and sines of the half
+    angles (floats or arrays)."""
+    return (cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy)
+
+
 def euler_zyx_to_quat(roll, pitch, yaw) -> np.ndarray:
     """Quaternion ``qz(yaw) ∘ qy(pitch) ∘ qx(roll)`` of ZYX Euler angles (A.67)-(A.71), rad."""
+    if isinstance(roll, float) and isinstance(pitch, float) and isinstance(yaw, float):  # one attitude: floats
+        if not (math.isfinite(roll) and math.isfinite(pitch) and math.isfinite(yaw)):
+            for name, angle in (("roll", roll), ("pitch", pitch), ("yaw", yaw)):
+                as_angles(name, angle)  # raises on NaN / inf, naming the argument
+        hr, hp, hy = 0.5 * roll, 0.5 * pitch, 0.5 * yaw
+        return np.array(_euler_zyx_quat(math.cos(hr), math.sin(hr), math.cos(hp), math.sin(hp),
+                                        math.cos(hy), math.sin(hy)))
     hr = 0.5 * as_angles("roll", roll)
     hp = 0.5 * as_angles("pitch", pitch)
     hy = 0.5 * as_angles("yaw", yaw)
-    cr, sr = np.cos(hr), np.sin(hr)
-    cp, sp = np.cos(hp), np.sin(hp)
-    cy, sy = np.cos(hy), np.sin(hy)
-    return np.stack(
-        [
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        ],
-        axis=-1,
-    )
+    return np.stack(_euler_zyx_quat(np.cos(hr), np.sin(hr), np.cos(hp), np.sin(hp), np.cos(hy), np.sin(hy)),
+                    axis=-1)
 
 
 def quat_to_euler_zyx(q) -> tuple[float, float, float]:
@@ -299,14 +330,30 @@ def quat_to_euler_zyx(q) -> tuple[float, float, float]:
 
     ``roll = atan2(2(q0q1 + q2q3), q0² − q1² − q2² + q3²)``, ``pitch = asin(2(q0q2 − q1q3))``,
     ``yaw = atan2(2(q0q3 + q1q2), q0² + q1² − q2² − q3²)``. At the gimbal lock (pitch = ±π/2) roll is set
-    to 0 and the whole rotation about z is reported as yaw. Scalar input (shape (4,)).
+    to 0 and the whole rotation about z is reported as yaw. Scalar input (shape (4,)); the quaternion is
+    normalised first (ValueError if zero).
     """
-    return rotmat_to_euler_zyx(_quat_to_rotmat(quat_normalize(_as_quat(q))))
+    w, x, y, z = _as_quat(q).tolist()
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if norm < 1e-300:
+        raise ValueError("q: cannot normalize a zero quaternion")
+    r = rotation_entries(w / norm, x / norm, y / norm, z / norm)
+    return _euler_zyx_angles(r[3], r[0], r[6], r[7], r[8], r[1], r[4])
 
 
 def euler_zyx_to_rotmat(roll, pitch, yaw) -> np.ndarray:
     """``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (A.43)."""
     return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
+
+
+def _euler_zyx_angles(r21: float, r11: float, r31: float, r32: float, r33: float, r12: float,
+                      r22: float) -> tuple[float, float, float]:
+    """(A.72) from the entries r_ij (1-based, plain floats) of R: see :func:`rotmat_to_euler_zyx`."""
+    cos_pitch = math.hypot(r32, r33)
+    if cos_pitch < GIMBAL_LOCK_TOLERANCE:
+        return 0.0, math.asin(min(max(-r31, -1.0), 1.0)), math.atan2(-r12, r22)
+    # atan2 rather than asin(−r31): better conditioned near ±π/2
+    return math.atan2(r32, r33), math.atan2(-r31, cos_pitch), math.atan2(r21, r11)
 
 
 def rotmat_to_euler_zyx(R) -> tuple[float, float, float]:
@@ -315,13 +362,8 @@ def rotmat_to_euler_zyx(R) -> tuple[float, float, float]:
     ``roll = atan2(r32, r33)``, ``pitch = asin(−r31)``, ``yaw = atan2(r21, r11)``; at the gimbal lock
     (|cos pitch| < 1e-12) roll = 0 and ``yaw = atan2(−r12, r22)``.
     """
-    R = as_array("R", R, (3, 3))
-    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
-    cos_pitch = float(np.hypot(R[2, 1], R[2, 2]))
-    if cos_pitch < GIMBAL_LOCK_TOLERANCE:
-        return 0.0, pitch, float(np.arctan2(-R[0, 1], R[1, 1]))
-    pitch = float(np.arctan2(-R[2, 0], cos_pitch))  # better conditioned than asin near ±π/2
-    return float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))
+    (r11, r12, _), (r21, r22, _), (r31, r32, r33) = as_array("R", R, (3, 3)).tolist()
+    return _euler_zyx_angles(r21, r11, r31, r32, r33, r12, r22)
 
 
 def euler_zxz_to_rotmat(psi1, phi, psi2) -> np.ndarray:
@@ -370,8 +412,8 @@ def euler_rate_matrix(roll, pitch) -> np.ndarray:
     """
     roll = as_scalar("roll", roll)
     pitch = as_scalar("pitch", pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     return np.array([[1.0, 0.0, -sp], [0.0, cr, cp * sr], [0.0, -sr, cp * cr]])
 
 
@@ -379,8 +421,8 @@ def euler_rate_matrix_inverse(roll, pitch) -> np.ndarray:
     """``D^{-1}`` of (A.80): ``η̇ = D^{-1} @ ω``; raises ValueError at the gimbal lock (cos pitch ≈ 0)."""
     roll = as_scalar("roll", roll)
     pitch = as_scalar("pitch", pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     if abs(cp) < GIMBAL_LOCK_TOLERANCE:
         raise ValueError("pitch: D is singular at pitch = ±π/2 (gimbal lock)")
     return np.array([[1.0, sr * sp / cp, cr * sp / cp], [0.0, cr, -sr], [0.0, sr / cp, cr / cp]])
@@ -392,8 +434,8 @@ def euler_rate_matrix_dot(roll, pitch, roll_rate, pitch_rate) -> np.ndarray:
     pitch = as_scalar("pitch", pitch)
     dr = as_scalar("roll_rate", roll_rate)
     dp = as_scalar("pitch_rate", pitch_rate)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
     return np.array(
         [
             [0.0, 0.0, -cp * dp],
@@ -424,10 +466,14 @@ def quat_error(q, q_des) -> np.ndarray:
     expressed in the frame of ``q`` (body frame)."""
     q = as_trailing("q", q, (4,))
     q_des = as_trailing("q_des", q_des, (4,))
-    norm2 = np.sum(q * q, axis=-1, keepdims=True)
-    if np.any(norm2 <= 0.0):
+    batched = q.ndim > 1 or q_des.ndim > 1
+    if batched:
+        q, q_des = np.broadcast_arrays(q, q_des)
+    w, x, y, z = _components(q)
+    norm2 = w * w + x * x + y * y + z * z
+    if np.any(norm2 <= 0.0) if batched else norm2 <= 0.0:
         raise ValueError("q: zero quaternion has no inverse")
-    return _quat_multiply(q * np.array([1.0, -1.0, -1.0, -1.0]) / norm2, q_des)
+    return _assemble(_hamilton(w / norm2, -x / norm2, -y / norm2, -z / norm2, *_components(q_des)), batched)
 
 
 def attitude_error_vector(q, q_des) -> np.ndarray:
@@ -436,8 +482,9 @@ def attitude_error_vector(q, q_des) -> np.ndarray:
     ``sgn(x) = +1`` for ``x >= 0``, ``−1`` otherwise. For small errors ``ε_o ≈ δφ / 2`` (spec §0.1 item 3).
     """
     err = quat_error(q, q_des)
-    sign = np.where(err[..., :1] >= 0.0, 1.0, -1.0)
-    return sign * err[..., 1:]
+    if err.ndim == 1:
+        return err[1:] if err[0] >= 0.0 else -err[1:]
+    return np.where(err[..., :1] >= 0.0, 1.0, -1.0) * err[..., 1:]
 
 
 def _as_quat(q) -> np.ndarray:

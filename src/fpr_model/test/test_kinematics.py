@@ -15,12 +15,15 @@ from fpr_model.kinematics import (
     forward_acceleration,
     forward_kinematics,
     jacobian,
+    jacobian_at,
     jacobian_dot,
     uav_accelerations,
     uav_velocities,
 )
 from fpr_model.parameters import default_parameters
 from fpr_model.selfcheck import reference_state
+
+from fpr_model import kinematics
 
 
 def _random_state(n, rng):
@@ -140,3 +143,48 @@ def test_bad_input_names_argument():
         forward_kinematics(p, q, np.full(9, np.nan))
     with pytest.raises(ValueError, match="q"):
         jacobian(p, np.full(10, np.nan))
+
+
+@pytest.mark.parametrize("n", [3, 4, 6])
+def test_jacobian_at_pseudo_inverse(n):
+    """J^† of JacobianAt: ν = J^† J ν (FKM), and the thrusts f = (J^†)ᵀ τ solve Jᵀ f = τ with the least norm
+    (f in the range of J: f = J (JᵀJ)^{-1} τ, the printed (3.32) for n > 3)."""
+    p = default_parameters(n)
+    rng = np.random.default_rng(60 + n)
+    for _ in range(10):
+        q, nu = _random_state(n, rng)
+        at = jacobian_at(p, q)
+        J = jacobian(p, q)
+        assert np.array_equal(at.matrix, J)
+        assert np.allclose(at.velocity(J @ nu), nu, atol=1e-11)
+        tau = rng.normal(size=6 + n)
+        f = at.thrusts(tau)
+        assert f.shape == (n, 3)
+        assert np.allclose(J.T @ f.reshape(-1), tau, atol=1e-11)
+        assert np.allclose(f.reshape(-1), J @ np.linalg.solve(J.T @ J, tau), atol=1e-10)
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_singularity_test_accepts_exactly_cond_below_the_limit(n, monkeypatch):
+    """The Frobenius bound ‖J‖_F ‖J^†‖_F ≥ cond(J) with the exact cond(J) as fallback accepts exactly the
+    configurations with np.linalg.cond(J) ≤ CONDITION_LIMIT: with the limit moved into the range of cond(J) of
+    random states, some are accepted by the bound, some only by the fallback, the rest refused."""
+    p = default_parameters(n)
+    rng = np.random.default_rng(70 + n)
+    states = [make_configuration(rng.normal(size=3), rng.normal(size=4), np.exp(rng.uniform(-7.0, 0.4, n)))
+              for _ in range(200)]  # leg angles log-uniform in [1e-3, 1.5] rad: cond(J) from about 6 to 1e4
+    conditions = np.array([np.linalg.cond(jacobian(p, q)) for q in states])
+    limit = float(np.median(conditions))
+    monkeypatch.setattr(kinematics, "CONDITION_LIMIT", limit)
+    outcomes = {"bound": 0, "fallback": 0, "refused": 0}
+    for q, condition in zip(states, conditions, strict=True):
+        at = jacobian_at(p, q, check_leg_range=False)
+        if condition > limit:
+            with pytest.raises(SingularConfigurationError, match="cond"):
+                at.inverse  # noqa: B018
+            outcomes["refused"] += 1
+        else:
+            inverse = at.inverse
+            bound = np.linalg.norm(at.matrix) * np.linalg.norm(inverse)
+            outcomes["bound" if bound <= limit else "fallback"] += 1
+    assert min(outcomes.values()) > 0, outcomes

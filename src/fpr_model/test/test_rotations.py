@@ -61,6 +61,29 @@ def test_batched_rotmat_and_quat():
     assert np.abs(rt.quat_rotate(q, v) - np.einsum("kij,kj->ki", R, v)).max() < 1e-12
 
 
+def test_single_and_batched_forms_agree():
+    """One quaternion / angle triple (plain-float evaluation) gives what a batch gives (numpy evaluation)."""
+    q = _random_quats(20, seed=5)
+    p = _random_quats(20, seed=6)
+    angles = np.random.default_rng(7).uniform(-3.0, 3.0, size=(20, 3))
+    batch = {
+        "multiply": rt.quat_multiply(q, p), "rotmat": rt.quat_to_rotmat(q), "error": rt.quat_error(q, p),
+        "attitude": rt.attitude_error_vector(q, p), "euler": rt.euler_zyx_to_quat(*angles.T),
+    }
+    for k in range(20):
+        assert np.allclose(rt.quat_multiply(q[k], p[k]), batch["multiply"][k], atol=1e-15)
+        assert np.allclose(rt.quat_to_rotmat(q[k]), batch["rotmat"][k], atol=1e-15)
+        assert np.allclose(rt.quat_error(q[k], p[k]), batch["error"][k], atol=1e-15)
+        assert np.allclose(rt.attitude_error_vector(q[k], p[k]), batch["attitude"][k], atol=1e-15)
+        single = rt.euler_zyx_to_quat(*angles[k].tolist())
+        assert single.shape == (4,) and np.allclose(single, batch["euler"][k], atol=1e-15)
+        assert np.allclose(rt.quat_to_euler_zyx(single), rt.rotmat_to_euler_zyx(rt.quat_to_rotmat(single)),
+                           atol=1e-15)
+    assert np.allclose(rt.quat_multiply(q[0], p), rt.quat_multiply(np.tile(q[0], (20, 1)), p), atol=1e-15)
+    with pytest.raises(ValueError, match="pitch"):
+        rt.euler_zyx_to_quat(0.1, float("nan"), 0.2)
+
+
 def test_x2_zyx_euler_round_trip():
     rng = np.random.default_rng(4)
     for _ in range(500):
