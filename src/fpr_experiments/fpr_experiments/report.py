@@ -173,9 +173,23 @@ def _realism_text(realism: dict | None) -> str:
 
 
 def _fmt(value: float | None, digits: int) -> str:
+    """``digits`` decimals, but at least two significant figures for small values (0.0041, not 0.00)."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
+    if value != 0.0 and abs(value) < 10.0 ** (1 - digits):
+        return f"{value:.2g}"
     return f"{value:.{digits}f}"
+
+
+def _ratio(value: float | None) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return f"{value:.2g}" if abs(value) < 1.0 else f"{value:.2f}"
+
+
+def _cell_text(text: str) -> str:
+    """Text for a markdown table cell ("|" would end the cell)."""
+    return text.replace("|", "\\|")
 
 
 def format_experiment_table(experiment: Experiment, summary: dict[str, Any]) -> str:
@@ -232,23 +246,29 @@ def results_markdown(summaries: list[dict[str, Any]], experiments: dict[str, Exp
             digits = metric_info(column.metric).digits
             text = _fmt(row["ours"], digits)
             if row["thesis"] is not None:
-                text += f" / {_fmt(row['thesis'], digits)} (×{_fmt(row['ratio'], 2)})"
+                text += f" / {_fmt(row['thesis'], digits)} (×{_ratio(row['ratio'])})"
             return text
 
         if len(variants) == 1 or len(columns) > 8:  # one row per metric
-            out += ["| metric | " + " | ".join(v["label"] + ("" if v["passed"] else " ⚠") for v in variants) + " |",
+            out += ["| metric | " + " | ".join(_cell_text(v["label"]) + ("" if v["passed"] else " ⚠")
+                                                for v in variants) + " |",
                     "|" + "---|" * (len(variants) + 1)]
             for column in columns:
-                out.append(f"| {column_label(column)} | " + " | ".join(cell(v, column) for v in variants) + " |")
+                out.append(f"| {_cell_text(column_label(column))} | "
+                           + " | ".join(cell(v, column) for v in variants) + " |")
         else:  # one row per variant, as the thesis's tables
-            out += ["| variant | " + " | ".join(column_label(c) for c in columns) + " |",
+            out += ["| variant | " + " | ".join(_cell_text(column_label(c)) for c in columns) + " |",
                     "|" + "---|" * (len(columns) + 1)]
             for v in variants:
                 flag = "" if v["passed"] else " ⚠"
                 out.append(f"| {v['label']}{flag} | " + " | ".join(cell(v, c) for c in columns) + " |")
-        out += ["", "Cells: ours / thesis (×ratio)." + (" ⚠ = a flight check failed: " + "; ".join(
-            f"{v['label']}: {', '.join(v['failed_checks'])}" for v in summary["variants"].values() if not v["passed"])
-            if any(not v["passed"] for v in summary["variants"].values()) else ""), ""]
+        referenced = any(row["thesis"] is not None for v in variants for row in v["metrics"].values())
+        failed = [v for v in variants if not v["passed"]]
+        legend = ("Cells: ours / thesis (×ratio)." if referenced else "No thesis table: our values only.")
+        if failed:
+            legend += " ⚠ = a flight check failed: " + "; ".join(
+                f"{v['label']}: {', '.join(v['failed_checks'])}" for v in failed)
+        out += ["", legend, ""]
         for o in summary["orderings"]:
             out.append(f"- {o['label']}: thesis {o['thesis']}; ours {o['ours']} — "
                        f"**{'reproduced' if o['reproduced'] else 'not reproduced'}**")

@@ -73,7 +73,7 @@ def test_experiment_report_json_results_markdown_and_claims(tmp_path):
     assert not written["variants"]["pd"]["passed"]  # its check could not pass on a NaN
     assert [c["holds"] for c in written["claims"]] == [True, False]
     text = report.results_markdown([summary], {"table_3_2": experiment}, "ros2 run fpr_experiments run all")
-    assert "## table_3_2: hover" in text and "| Impedance | 0.20 / 4.60 (×0.04) |" in text
+    assert "## table_3_2: hover" in text and "| Impedance | 0.20 / 4.60 (×0.043) |" in text
     assert "PD ⚠" in text and "do not edit by hand" in text
     table = report.format_experiment_table(experiment, summary)
     assert "thesis 4.60" in table and "CHECKS FAILED" in table
