@@ -75,9 +75,9 @@ def _write_results(names: list[str], output_root: str, path: str, command: str) 
             summary = json.load(stream)
         # the realism settings of the run (each variant's metrics.json keeps its scenario's)
         for variant in summary.get("variants", {}).values():
-            path = os.path.join(output_root, name, variant.get("report_dir", ""), "metrics.json")
-            if "realism" not in summary and os.path.exists(path):
-                with open(path, encoding="utf-8") as stream:
+            variant_json = os.path.join(output_root, name, variant.get("report_dir", ""), "metrics.json")
+            if "realism" not in summary and os.path.exists(variant_json):
+                with open(variant_json, encoding="utf-8") as stream:
                     summary["realism"] = json.load(stream).get("realism")
         summaries.append(summary)
         experiments[name] = load_experiment(name)
