@@ -183,7 +183,10 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
     info_topic = "/fpr/info_link" if options.info_link else "/fpr/info"
     for i in range(1, n + 1):
         ns, group = uav_namespace(i), f"uav{i}"
-        specs.append(_spec(options, "px4_bridge", ns, group, {"uav_id": i}, i))
+        bridge = {"uav_id": i}
+        if options.backend == "sim":  # the emulated PX4 boots at simulation time 0: exact setpoint stamps
+            bridge["px4_boot_clock"] = "ros_time"
+        specs.append(_spec(options, "px4_bridge", ns, group, bridge, i))
         if options.cameras == "images":
             specs.append(_spec(options, "aruco_detector", ns, group, {}, i))
         specs.append(_spec(options, "pose_estimator", ns, group, {"uav_id": i, "n": n}, i))

@@ -45,6 +45,7 @@ from fpr_px4_bridge.px4_protocol import (
     encode_set_attitude_target,
 )
 from fpr_px4_bridge.telemetry import TelemetryDecoder
+from fpr_px4_bridge.time_sync import SimulationBootClock
 
 __all__ = ["BridgeConfig", "BridgeStatus", "Px4Bridge", "SetpointResult"]
 
@@ -69,9 +70,14 @@ class BridgeConfig:
     nominal_voltage: float = 12.4
     quaternion_tolerance: float = 1e-3    #: refuse setpoints with | |q| - 1 | above this
     heartbeat_period: float = 1.0         #: [s] our HEARTBEAT period
+    #: "estimate": PX4's time_boot_ms mapped onto the ROS clock by the telemetry's time sync (a real vehicle);
+    #: "ros_time": PX4's boot clock is the ROS (simulated) clock, as for PX4 SITL in lockstep and fpr_sim's emulator
+    px4_boot_clock: str = "estimate"
     offboard: OffboardConfig = OffboardConfig()
 
     def __post_init__(self) -> None:
+        if self.px4_boot_clock not in ("estimate", "ros_time"):
+            raise ValueError(f"px4_boot_clock must be 'estimate' or 'ros_time', got {self.px4_boot_clock!r}")
         if self.stream_rate < 50.0:
             raise ValueError(f"stream_rate must be >= 50 Hz, got {self.stream_rate}")
         if not 0.0 < self.setpoint_timeout < self.offboard.heartbeat_timeout + 10.0:
@@ -137,7 +143,7 @@ class Px4Bridge:
         self.config = config
         self.link = link
         self.machine = OffboardStateMachine(config.offboard)
-        self.telemetry = TelemetryDecoder()
+        self.telemetry = TelemetryDecoder(SimulationBootClock() if config.px4_boot_clock == "ros_time" else None)
         self.boot_time = boot_time  # local time that our time_boot_ms counts from
         self._setpoint: _Setpoint | None = None
         self._last_heartbeat_sent = -math.inf

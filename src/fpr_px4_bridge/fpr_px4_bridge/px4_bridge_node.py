@@ -63,6 +63,9 @@ _PARAMETERS = {
     "status_rate": (10.0, "[Hz] status publication rate"),
     "body_frame_id": ("", "frame_id of imu and velocity_body; empty: uav<i>/base_link"),
     "teleop_topic": ("/fpr/teleop", "TeleopCommand topic (mode: idle / arm / fly / land / kill)"),
+    "px4_boot_clock": ("estimate", "estimate: map PX4's time_boot_ms onto the ROS clock from the telemetry (a real "
+                                   "vehicle); ros_time: PX4's boot clock is the ROS clock (PX4 SITL in lockstep, "
+                                   "fpr_sim's emulator: the graph description sets it with backend sim)"),
     "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
 }
@@ -113,7 +116,7 @@ class Px4BridgeNode(Node):
             stream_rate=float(p["stream_rate"]), setpoint_timeout=float(p["setpoint_timeout"]),
             thrust_min=float(p["thrust_min"]), a_f=a_f, b_f=b_f, fallback_voltage=float(p["fallback_voltage"]),
             battery_compensation=bool(p["battery_compensation"]), nominal_voltage=float(p["nominal_voltage"]),
-            quaternion_tolerance=float(p["quaternion_tolerance"]),
+            quaternion_tolerance=float(p["quaternion_tolerance"]), px4_boot_clock=str(p["px4_boot_clock"]),
             offboard=OffboardConfig(
                 heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),
                 command_retry_interval=float(p["command_retry_interval"]),

@@ -10,13 +10,18 @@ stamps each SET_ATTITUDE_TARGET with its setpoint's own instant that way (see :m
 
 The estimate restarts when the autopilot reboots (``t_boot`` jumps back) or the local clock jumps back (a
 simulation reset), so stamps never come out of an old epoch.
+
+:class:`SimulationBootClock` is the exact mapping for a simulated autopilot whose boot clock IS the simulation
+time (PX4 SITL in lockstep, fpr_sim's emulator: boot at t = 0): offset 0, no estimate. The minimum-delay estimator
+is biased there whenever the receiving node's /clock lags the simulation (a sample then looks "early"), which
+shifted setpoint stamps by up to a period and could make two new setpoints look like one to the lockstep.
 """
 
 from __future__ import annotations
 
 from collections import deque
 
-__all__ = ["BootTimeMapper"]
+__all__ = ["BootTimeMapper", "SimulationBootClock"]
 
 
 class BootTimeMapper:
@@ -69,3 +74,14 @@ class BootTimeMapper:
         """The autopilot boot-clock instant [s] of the local instant ``local_time``; None before any sample."""
         offset = self.offset
         return None if offset is None else local_time - offset
+
+
+class SimulationBootClock(BootTimeMapper):
+    """The autopilot's boot clock is the local (simulated) clock: ``t_local = t_boot`` (see the module doc)."""
+
+    @property
+    def offset(self) -> float:
+        return 0.0
+
+    def update(self, boot_time: float, received_time: float) -> None:
+        """Nothing to estimate."""

@@ -2,7 +2,8 @@
 
 import numpy as np
 import pytest
-from fpr_px4_bridge.time_sync import BootTimeMapper
+from fpr_px4_bridge.bridge import BridgeConfig
+from fpr_px4_bridge.time_sync import BootTimeMapper, SimulationBootClock
 
 
 def test_offset_is_the_least_delayed_sample_and_follows_reboots():
@@ -38,3 +39,21 @@ def test_to_boot_is_the_inverse_of_to_local():
     mapper.update(12.1, 112.56)  # least delayed: offset 100.46
     assert mapper.to_boot(112.7) == pytest.approx(12.24)
     assert mapper.to_local(mapper.to_boot(112.7), fallback=0.0) == pytest.approx(112.7)
+
+
+def test_simulation_boot_clock_is_exact_where_the_estimate_is_biased():
+    """A receiver whose /clock lags the simulation sees samples that look early: the estimate shifts, the exact one not."""
+    estimate, exact = BootTimeMapper(), SimulationBootClock()
+    for k in range(100):
+        boot = 0.01 * k
+        received = boot - (0.02 if k % 10 == 3 else 0.0)  # the node's /clock 2 periods behind now and then
+        estimate.update(boot, received)
+        exact.update(boot, received)
+    assert estimate.offset == pytest.approx(-0.02)  # biased by the lag
+    assert exact.offset == 0.0 and exact.to_boot(3.21) == 3.21 and exact.to_local(1.5, fallback=0.0) == 1.5
+
+
+def test_bridge_config_refuses_an_unknown_boot_clock():
+    assert BridgeConfig(px4_boot_clock="ros_time").px4_boot_clock == "ros_time"
+    with pytest.raises(ValueError, match="px4_boot_clock"):
+        BridgeConfig(px4_boot_clock="wall")
