@@ -42,7 +42,7 @@ def test_to_boot_is_the_inverse_of_to_local():
 
 
 def test_simulation_boot_clock_is_exact_where_the_estimate_is_biased():
-    """A receiver whose /clock lags the simulation sees samples that look early: the estimate shifts, the exact one not."""
+    """A receiver whose /clock lags sees early-looking samples: the estimate shifts, the exact one does not."""
     estimate, exact = BootTimeMapper(), SimulationBootClock()
     for k in range(100):
         boot = 0.01 * k
