@@ -26,6 +26,17 @@ LAND / KILL commands arrive in the same UDP burst as the missing setpoint, and t
 mode after every poll). A UAV that has never streamed is not waited for (a scenario that starts hovering flies
 the held hover setpoint until its controllers take over): the pre-arming phase costs no waits and no timeouts.
 
+Time base per link: only a link whose setpoint stamps are on the simulation's clock can be waited for. Every
+new stamped setpoint (``time_boot_ms`` != 0) is checked on arrival: its age (simulation time − stamp) must lie in
+[−``clock_tolerance``, ``clock_lag_limit``] (a few ms ahead: millisecond rounding; up to seconds behind: a graph
+that starts late). A stamp outside marks the link's time base as *foreign* — a third-party client (MAVSDK,
+MAVROS, a GCS) that puts its own uptime in ``time_boot_ms``, as PX4 allows — for the rest of the run: the lockstep
+no longer waits for that UAV, which then runs free against the simulator's pacing (``real_time_factor``), and
+:attr:`Simulation.on_notice` receives one line saying so. (Without this, every 20 ms period of such a link waited
+for the watchdog, and simulated time nearly stopped.) A client whose clock happens to lag the simulation's by
+less than ``clock_lag_limit`` is waited for at first; the lockstep then runs on the client's clock, its stamps
+soon come out ahead of the simulation time, and it is reclassified within a few periods.
+
 Watchdog: a live stream that neither delivers nor ends within ``lockstep_timeout`` wall seconds is a stalled
 graph (a dead or hung node). ``lockstep_on_timeout = "stop"`` (default) raises :class:`LockstepStalled`, one
 message naming the UAVs it waited for, instead of flying on without setpoints; ``"continue"`` counts it in
@@ -39,9 +50,11 @@ listens (see :mod:`fpr_sim.px4_emulator`).
 
 from __future__ import annotations
 
+import logging
 import math
 import select
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +85,10 @@ class SimulationOptions:
     local_base_port: int = LOCAL_BASE_PORT  #: UAV i's emulator binds local_base_port + i − 1 (0: ephemeral, tests)
     remote_base_port: int = REMOTE_BASE_PORT  #: ... and sends to remote_base_port + i − 1 (0: only once contacted)
     remote_ports: tuple[int, ...] = ()  #: explicit remote port per UAV (tests); overrides remote_base_port
+    #: [s] a setpoint stamp later than the simulation time by more than this is on a foreign clock (module doc)
+    clock_tolerance: float = 0.005
+    #: [s] ... and so is one older than this on arrival
+    clock_lag_limit: float = 5.0
 
 
 class Simulation:
@@ -110,6 +127,11 @@ class Simulation:
         self._stream_live = [False] * n  # a new setpoint arrived during the previous control period
         self.lockstep_timeouts = 0
         self.lockstep_waits = 0
+        #: per UAV: the link's setpoint stamps are on a foreign clock (module doc): the lockstep does not wait for it
+        self.foreign_clock = [False] * n
+        self._stamps_checked = [0] * n  # setpoint_latency entries already classified, per UAV
+        #: receives one line per notable event (a link on a foreign clock); the simulator node logs it
+        self.on_notice: Callable[[str], None] = logging.getLogger("fpr_sim").info
         self._truth = truth
         if scenario.initial_state.mode == "hover" and scenario.initial_state.armed:
             self._start_hovering()
@@ -179,8 +201,33 @@ class Simulation:
                                      float(battery.current[i]))
 
     def _expects_setpoint(self, i: int) -> bool:
-        """Lockstep waits for UAV i: its stream is live and has not ended (see the module doc)."""
-        return self._stream_live[i] and self.emulators[i].takes_offboard_setpoints
+        """Lockstep waits for UAV i: its stream is live, has not ended, and is on the simulation's clock (module
+        doc)."""
+        return self._stream_live[i] and not self._on_foreign_clock(i) and self.emulators[i].takes_offboard_setpoints
+
+    def _on_foreign_clock(self, i: int) -> bool:
+        """Classify UAV i's new stamped setpoints (module doc, "time base per link"); True once foreign."""
+        if self.foreign_clock[i]:
+            return True
+        latency = self.emulators[i].setpoint_latency
+        new = latency.count - self._stamps_checked[i]
+        if new <= 0:
+            return False
+        self._stamps_checked[i] = latency.count
+        history = latency.history
+        options = self.options
+        for k in range(1, min(new, len(history)) + 1):
+            arrival, age = history[-k]
+            if age < -options.clock_tolerance or age > options.clock_lag_limit:
+                self.foreign_clock[i] = True
+                stamp = arrival - age
+                self.on_notice(
+                    f"lockstep: uav{i + 1}'s setpoints carry time_boot_ms {stamp * 1e3:.0f} ms at simulation time "
+                    f"{arrival:.3f} s: its client keeps its own clock (MAVSDK, MAVROS, a GCS), not the simulation's; "
+                    "the lockstep no longer waits for this link, which runs paced at the simulator's "
+                    "real_time_factor")
+                return True
+        return False
 
     def _has_new_setpoint(self, i: int) -> bool:
         """UAV i's newest setpoint is new for the current boundary (see the module doc)."""
@@ -191,10 +238,12 @@ class Simulation:
         """Lockstep: block until each expected emulator has a setpoint new for this boundary (or timeout)."""
         deadline = time.monotonic() + self.options.lockstep_timeout
         t = self.plant.time
+        for i in range(self.n):
+            self._on_foreign_clock(i)  # classify what arrived during the period, live streams or not
         expected = [i for i in range(self.n) if self._expects_setpoint(i)]
         while True:
-            missing = [self.emulators[i] for i in expected
-                       if self.emulators[i].takes_offboard_setpoints and not self._has_new_setpoint(i)]
+            missing = [self.emulators[i] for i in expected if self.emulators[i].takes_offboard_setpoints
+                       and not self._on_foreign_clock(i) and not self._has_new_setpoint(i)]
             if not missing:
                 break
             remaining = deadline - time.monotonic()

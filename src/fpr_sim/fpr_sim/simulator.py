@@ -80,6 +80,7 @@ class SimulatorNode(Node):
                                     local_base_port=int(get("local_base_port").value),
                                     remote_base_port=int(get("remote_base_port").value))
         self.sim = Simulation(self.scenario, options)
+        self.sim.on_notice = self.get_logger().warning
         self.real_time_factor = max(0.0, float(get("real_time_factor").value))
         self.clock_period = 1.0 / min(250.0, max(1.0, float(get("clock_rate").value)))
         self.truth_period = 1.0 / max(1.0, float(get("ground_truth_rate").value))

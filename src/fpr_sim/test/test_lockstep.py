@@ -224,3 +224,31 @@ def test_telemetry_time_boot_ms_is_the_sample_time(rig):
     assert len(stamps) == 3 * 5
     assert sorted(set(stamps)) == [20 * k for k in range(1, 6)]
     assert np.all(np.array(stamps) % 20 == 0)
+
+
+def test_a_client_on_its_own_clock_is_not_waited_for_and_said_once(strict_rig):
+    """MAVSDK / MAVROS put their own uptime in time_boot_ms: that link runs free (paced), no stall, one notice."""
+    sim, controllers = strict_rig
+    notices = []
+    sim.on_notice = notices.append
+    fresh_periods(sim, controllers, 3)  # on the simulation's clock: waited for
+    assert sim.foreign_clock == [False, False, False]
+    uptime_ms = 123_456  # the client's clock, far ahead of the simulation's 60 ms
+    for k in range(10):
+        controllers.send(now_ms(sim), uavs=[0, 2])
+        controllers.send(uptime_ms + 20 * k, uavs=[1])
+        sim.advance(PERIOD)
+    controllers.send(now_ms(sim), uavs=[0, 2])  # UAV 2's client stops: not a stall, it was never waited for
+    sim.advance(PERIOD)
+    assert sim.foreign_clock == [False, True, False] and sim.lockstep_timeouts == 0
+    assert len(notices) == 1 and "uav2" in notices[0] and "123456 ms" in notices[0]
+
+
+def test_a_stamp_far_behind_the_simulation_is_a_foreign_clock(rig):
+    sim, controllers = rig
+    sim.advance(7.0)  # a client whose clock started 6 s after the simulator's (its stamps 1 s, the age 6 s)
+    controllers.send(now_ms(sim) - 6000, uavs=[0])
+    controllers.send(now_ms(sim) - 300, uavs=[1])  # a graph 0.3 s behind at its start: still the simulation's
+    controllers.send(now_ms(sim), uavs=[2])
+    sim.advance(2 * PERIOD)  # read during the first period, classified at the next boundary
+    assert sim.foreign_clock == [True, False, False]
