@@ -132,6 +132,8 @@ class Simulation:
         self._stamps_checked = [0] * n  # setpoint_latency entries already classified, per UAV
         #: receives one line per notable event (a link on a foreign clock); the simulator node logs it
         self.on_notice: Callable[[str], None] = logging.getLogger("fpr_sim").info
+        #: set by a signal handler (the simulator node): the lockstep's wait gives up, the owner's loop ends
+        self.stop_requested = False
         self._truth = truth
         if scenario.initial_state.mode == "hover" and scenario.initial_state.armed:
             self._start_hovering()
@@ -247,6 +249,8 @@ class Simulation:
             if not missing:
                 break
             remaining = deadline - time.monotonic()
+            if self.stop_requested:
+                break
             if remaining <= 0.0:
                 self.lockstep_timeouts += 1
                 if self.options.lockstep_on_timeout == "stop":

@@ -131,20 +131,23 @@ class SimulatorNode(Node):
         steps_per_spin = max(1, round(1.0 / (self.clock_period * float(self.get_parameter("control_rate").value))))
         try:
             steps = 0
-            while rclpy.ok(context=self.context) and self.step():
+            while rclpy.ok(context=self.context) and not self.sim.stop_requested and self.step():
                 steps += 1
                 if steps % steps_per_spin == 0:
                     executor.spin_once(timeout_sec=0.0)
         finally:
             executor.remove_node(self)
             executor.shutdown(timeout_sec=0.0)
+        if self.sim.stop_requested:
+            self.get_logger().info(f"stopped by a signal at t = {self.sim.time:.3f} s")
 
     def _wait_for_clock_subscribers(self, executor) -> None:
         expected = int(self.get_parameter("wait_for_clock_subscribers").value)
         if expected <= 0:
             return
         deadline = time.monotonic() + float(self.get_parameter("wait_for_clock_subscribers_timeout").value)
-        while rclpy.ok(context=self.context) and self.clock_pub.get_subscription_count() < expected:
+        while rclpy.ok(context=self.context) and not self.sim.stop_requested and \
+                self.clock_pub.get_subscription_count() < expected:
             if time.monotonic() > deadline:
                 self.get_logger().warning(f"/clock has {self.clock_pub.get_subscription_count()} of the {expected} "
                                           "expected subscriptions: starting anyway")
@@ -284,13 +287,26 @@ def _desc(text: str):
 
 
 def main(args=None) -> None:
+    """``ros2 run fpr_sim simulator``. SIGINT / SIGTERM stop the loop between two steps (a flag), then the node is
+    destroyed and the context shut down: rclpy's own handler would shut the context down asynchronously while the
+    loop publishes, which could crash the process (seen once as SIGSEGV in CI) or raise RCLError."""
+    import signal
     import sys
+
+    from rclpy.signals import SignalHandlerOptions
 
     from fpr_sim.simulation import LockstepStalled
 
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     status = 0
+
+    def request_stop(signum, _frame) -> None:
+        if node is None or node.sim.stop_requested:
+            raise KeyboardInterrupt  # before the loop runs, or a second signal: stop at once
+        node.sim.stop_requested = True  # nothing else here: the handler may interrupt any Python code
+
+    previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         node = SimulatorNode()
         node.run()
@@ -299,11 +315,9 @@ def main(args=None) -> None:
     except LockstepStalled as error:
         node.get_logger().error(str(error))
         status = 1
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a publish racing the shutdown (SIGINT/SIGTERM) found its context gone: nothing to report
     finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if node is not None:
             node.destroy_node()
         if rclpy.ok():
