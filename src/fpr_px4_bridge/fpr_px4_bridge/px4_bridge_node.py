@@ -63,9 +63,9 @@ _PARAMETERS = {
     "status_rate": (10.0, "[Hz] status publication rate"),
     "body_frame_id": ("", "frame_id of imu and velocity_body; empty: uav<i>/base_link"),
     "teleop_topic": ("/fpr/teleop", "TeleopCommand topic (mode: idle / arm / fly / land / kill)"),
-    "px4_boot_clock": ("estimate", "estimate: map PX4's time_boot_ms onto the ROS clock from the telemetry (a real "
-                                   "vehicle); ros_time: PX4's boot clock is the ROS clock (PX4 SITL in lockstep, "
-                                   "fpr_sim's emulator: the graph description sets it with backend sim)"),
+    "px4_boot_clock": ("auto", "estimate: map PX4's time_boot_ms onto the ROS clock from the telemetry (a real "
+                               "vehicle); ros_time: PX4's boot clock is the ROS clock (PX4 SITL in lockstep, "
+                               "fpr_sim's emulator); auto: ros_time with use_sim_time, else estimate"),
     "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
 }
@@ -116,7 +116,8 @@ class Px4BridgeNode(Node):
             stream_rate=float(p["stream_rate"]), setpoint_timeout=float(p["setpoint_timeout"]),
             thrust_min=float(p["thrust_min"]), a_f=a_f, b_f=b_f, fallback_voltage=float(p["fallback_voltage"]),
             battery_compensation=bool(p["battery_compensation"]), nominal_voltage=float(p["nominal_voltage"]),
-            quaternion_tolerance=float(p["quaternion_tolerance"]), px4_boot_clock=str(p["px4_boot_clock"]),
+            quaternion_tolerance=float(p["quaternion_tolerance"]),
+            px4_boot_clock=self._boot_clock(str(p["px4_boot_clock"])),
             offboard=OffboardConfig(
                 heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),
                 command_retry_interval=float(p["command_retry_interval"]),
@@ -153,6 +154,13 @@ class Px4BridgeNode(Node):
             f"stream {self.config.stream_rate:.0f} Hz, signing {'on' if key else 'off'}, "
             f"a_f={a_f} N/V b_f={b_f} N")
         self.get_logger().info(f"thrust normalization: {self.config.thrust_normalization()}")
+
+    def _boot_clock(self, value: str) -> str:
+        """The ``px4_boot_clock`` parameter resolved: ``auto`` is ``ros_time`` on simulation time (the simulated PX4
+        boots at simulation time 0), ``estimate`` otherwise."""
+        if value != "auto":
+            return value  # BridgeConfig refuses anything but estimate / ros_time, naming the parameter
+        return "ros_time" if bool(self.get_parameter("use_sim_time").value) else "estimate"
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

@@ -118,6 +118,7 @@ def graph(fake_px4_factory, free_port):
         Parameter("stream_rate", value=STREAM_RATE),
         Parameter("offboard_warmup", value=1.0),
         Parameter("status_rate", value=20.0),
+        Parameter("px4_boot_clock", value="estimate"),  # the time-sync estimate under test (auto: exact ros_time)
     ])
     helper = rclpy.create_node("px4_bridge_test_helper", context=context, parameter_overrides=sim_time)
     executor = SingleThreadedExecutor(context=context)
@@ -288,3 +289,22 @@ def test_kill_and_disconnect(graph):
     # heartbeat_timeout 1.5 s after the last HEARTBEAT (10 Hz), seen in the next status (20 Hz)
     assert 1.5 - 0.1 <= lost_at - silent_at <= 1.5 + 0.05 + 0.05
     assert statuses[-1].link_age >= 1.5
+
+
+@pytest.mark.parametrize("sim_time, setting, expected", [
+    (True, "auto", "ros_time"), (False, "auto", "estimate"), (True, "estimate", "estimate"),
+    (False, "ros_time", "ros_time")])
+def test_px4_boot_clock_auto_follows_use_sim_time(free_port, sim_time, setting, expected):
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=[
+            Parameter("use_sim_time", value=sim_time), Parameter("px4_boot_clock", value=setting),
+            Parameter("connection_url", value=f"udp://127.0.0.1:{free_port}")])
+        assert node.bridge.config.px4_boot_clock == expected
+        node.destroy_node()
+        with pytest.raises(ValueError, match="px4_boot_clock"):
+            Px4BridgeNode(context=context, parameter_overrides=[
+                Parameter("px4_boot_clock", value="wall"), Parameter("connection_url", value=f"udp://127.0.0.1:{free_port}")])
+    finally:
+        rclpy.shutdown(context=context)
