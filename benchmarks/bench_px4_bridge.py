@@ -7,10 +7,19 @@
 2. ROS setpoint -> datagram on the wire: an AttitudeThrustSetpoint published in one process (rclpy), the
    px4_bridge node in the same process (its own executor thread), a fake PX4 socket timing the arrival of the
    matching SET_ATTITUDE_TARGET. p50 / p99 over N samples.
+3. SET_ATTITUDE_TARGET stream at the peer: the px4_bridge node (wall clock, its own executor thread) gets
+   setpoints from a 50 Hz ROS timer in another executor thread (as the controller publishes them) for
+   ``--stream-seconds`` (20 s) per phase; a pymavlink/UDP peer on 127.0.0.1 (its own thread) timestamps every
+   frame. Reported: the rate at the peer (target 50 +- 1 Hz), the interval histogram (p50, p99, max gap;
+   target p99 <= 25 ms on an idle machine), duplicated frames (a frame carrying the same setpoint as the frame
+   before it: same time_boot_ms and thrust; every published setpoint has a thrust of its own) and the delay
+   publish -> first frame of that setpoint on the wire. Two phases of the controller's timer against the
+   bridge's stream timer: mid-period (+10 ms) and in phase (+0.5 ms, the worst case for any rate limiter).
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import socket
@@ -159,6 +168,153 @@ def bench_ros_latency(n=1000):
           f"(n={len(latencies)}, lost {lost}; target p99 <= 2 ms)")
 
 
+def _stream_timer(node):
+    """The px4_bridge node's stream timer (period 1 / stream_rate)."""
+    period_ns = int(round(1e9 / node.config.stream_rate))
+    return min(node.timers, key=lambda timer: abs(timer.timer_period_ns - period_ns))
+
+
+def bench_stream(seconds=20.0, phase=0.010, rate=50.0):
+    """Rate, intervals and duplicates of the SET_ATTITUDE_TARGET stream at a UDP peer (module doc, 3.)."""
+    import rclpy
+    from fpr_px4_bridge.px4_bridge_node import Px4BridgeNode
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from fpr_msgs.msg import AttitudeThrustSetpoint
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("connection_url", value=f"udp://127.0.0.1:{port}"), Parameter("stream_rate", value=rate)])
+    helper = rclpy.create_node("bench_controller", context=context)
+    executors = [SingleThreadedExecutor(context=context), SingleThreadedExecutor(context=context)]
+    executors[0].add_node(node)
+    executors[1].add_node(helper)
+    pub = helper.create_publisher(AttitudeThrustSetpoint, "/fpr/uav1/setpoint",
+                                  QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
+    sock, heartbeat = fake_peer(("127.0.0.1", port))
+    sock.settimeout(0.05)
+    frames: list[tuple[float, int, float]] = []  # (arrival monotonic [s], time_boot_ms, thrust)
+    ticks: list[float] = []  # the bridge's stream ticks and setpoint arrivals (its clock [s]), observed only
+    arrivals: list[float] = []
+    tick, submit = node.bridge.tick, node.bridge.submit_setpoint
+
+    def observed_tick(now):
+        ticks.append(now)
+        return tick(now)
+
+    def observed_submit(*args, **kwargs):
+        arrivals.append(args[3])
+        return submit(*args, **kwargs)
+
+    node.bridge.tick, node.bridge.submit_setpoint = observed_tick, observed_submit
+    running = threading.Event()
+    running.set()
+
+    def peer() -> None:
+        parser = mavlink.MAVLink(None)
+        next_heartbeat = 0.0
+        while running.is_set():
+            now = time.monotonic()
+            if now >= next_heartbeat:  # 10 Hz HEARTBEAT (the bridge's silence rule: any frame within 0.5 s)
+                sock.sendto(heartbeat, ("127.0.0.1", port))
+                next_heartbeat = now + 0.1
+            try:
+                data = sock.recv(65535)
+            except TimeoutError:
+                continue
+            t_rx = time.monotonic()
+            try:
+                m = parser.decode(bytearray(data))
+            except Exception:  # noqa: BLE001
+                continue
+            if m is not None and m.get_type() == "SET_ATTITUDE_TARGET":
+                frames.append((t_rx, m.time_boot_ms, m.thrust))
+
+    threads = [threading.Thread(target=peer, daemon=True)]
+    threads += [threading.Thread(target=e.spin, daemon=True) for e in executors]
+    for thread in threads:
+        thread.start()
+    end = time.monotonic() + 5.0
+    while (pub.get_subscription_count() == 0 or node.link.peer is None) and time.monotonic() < end:
+        time.sleep(0.01)
+    with node._lock:
+        node.bridge.on_teleop(TeleopMode.ARM, node._now())  # the peer reports armed: WARMUP streams
+    published: dict[float, float] = {}  # normalized thrust -> publish time (monotonic)
+    count = [0]
+
+    def publish() -> None:
+        k = count[0]
+        count[0] += 1
+        thrust_newton = 5.0 + 0.001 * (k % 5000)
+        msg = AttitudeThrustSetpoint()
+        msg.header.stamp = helper.get_clock().now().to_msg()
+        msg.uav_id = 1
+        msg.attitude.w, msg.attitude.x, msg.attitude.y, msg.attitude.z = Q_NORTH
+        msg.thrust = thrust_newton
+        published[round(node.bridge.normalized_thrust(thrust_newton, 0.0), 6)] = time.monotonic()
+        pub.publish(msg)
+
+    # the controller's timer: created `phase` s after a tick of the bridge's stream timer (rclpy timers keep the
+    # phase of their creation)
+    time.sleep(_stream_timer(node).time_until_next_call() * 1e-9 + phase)
+    helper.create_timer(1.0 / 50.0, publish)
+    start = time.monotonic()
+    time.sleep(seconds + 1.0)
+    running.clear()
+    for executor in executors:
+        executor.shutdown()
+    for thread in threads:
+        thread.join(timeout=2.0)
+    node.destroy_node()
+    helper.destroy_node()
+    rclpy.shutdown(context=context)
+    sock.close()
+    window = [f for f in frames if start + 0.5 <= f[0] <= start + 0.5 + seconds]  # steady state
+    times = [f[0] for f in window]
+    gaps = [(b - a) * 1e3 for a, b in zip(times, times[1:], strict=False)]
+    duplicates = sum(1 for a, b in zip(window, window[1:], strict=False) if (a[1], a[2]) == (b[1], b[2]))
+    delays = []
+    seen = set()
+    for t_rx, _, thrust in window:
+        key = round(thrust, 6)
+        if key in published and key not in seen:
+            seen.add(key)
+            delays.append((t_rx - published[key]) * 1e3)
+    measured = (len(times) - 1) / (times[-1] - times[0])
+    # where the setpoints land in the stream period: arrival − the last tick before it, at the bridge
+    offsets = []
+    i = 0
+    for arrival in arrivals:
+        while i + 1 < len(ticks) and ticks[i + 1] <= arrival:
+            i += 1
+        if ticks and ticks[i] <= arrival:
+            offsets.append((arrival - ticks[i]) * 1e3)
+    print(f"stream at the peer, controller timer +{phase * 1e3:.1f} ms after the stream timer (setpoints arrive "
+          f"{percentile(offsets, 50):.1f} ms after a tick, p1-p99 {percentile(offsets, 1):.1f}-"
+          f"{percentile(offsets, 99):.1f} ms; {seconds:.0f} s, "
+          f"{len(window)} frames): rate {measured:.2f} Hz (target {rate:.0f} +- 1), intervals p50 "
+          f"{percentile(gaps, 50):.2f} ms, p99 {percentile(gaps, 99):.2f} ms, max gap {max(gaps):.2f} ms, "
+          f"min {min(gaps):.2f} ms; duplicated frames {duplicates}; publish -> wire p50 "
+          f"{percentile(delays, 50):.2f} ms, p99 {percentile(delays, 99):.2f} ms, max {max(delays):.2f} ms "
+          f"({len(delays)} setpoints)")
+
+
 if __name__ == "__main__":
-    bench_encode_send()
-    bench_ros_latency()
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", choices=("encode", "latency", "stream"), help="run one benchmark")
+    parser.add_argument("--stream-seconds", type=float, default=20.0, help="[s] stream measured per phase")
+    args = parser.parse_args()
+    if args.only in (None, "encode"):
+        bench_encode_send()
+    if args.only in (None, "latency"):
+        bench_ros_latency()
+    if args.only in (None, "stream"):
+        for offset in (0.010, 0.0005):
+            bench_stream(args.stream_seconds, offset)

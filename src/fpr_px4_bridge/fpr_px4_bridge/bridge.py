@@ -2,11 +2,25 @@
 
 One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` [s]:
 - :meth:`Px4Bridge.submit_setpoint` for each ``AttitudeThrustSetpoint`` (validated; forwarded at once when
-  streaming, so the latency to the wire is one encode + send);
+  streaming and the current stream slot is free, so the latency to the wire is then one encode + send);
 - :meth:`Px4Bridge.on_teleop` for each ``/fpr/teleop`` mode;
-- :meth:`Px4Bridge.tick` at ``stream_rate`` (>= 50 Hz): state machine, repetition of the latest setpoint while
-  it is younger than ``setpoint_timeout``, COMMAND_LONGs, the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
+- :meth:`Px4Bridge.tick` at ``stream_rate`` (>= 50 Hz): state machine, the stream slots (below), COMMAND_LONGs,
+  the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
 - :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
+
+Stream rate: exactly ONE SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. The ticks
+(the node's timer at ``stream_rate``) cut time into slots of one period; a tick less than 0.6 T after the tick
+that opened the current slot does not open another (a timer late by up to 0.4 T, then on time, or a caller
+ticking at twice the rate, adds no frame). In each slot:
+
+- a new setpoint goes out at once if nothing was sent in the slot yet; otherwise it is held and sent by the tick
+  that opens the next slot, as that slot's frame: a new setpoint leaves within one period (the latest one wins);
+- a slot that ends with no frame (no new setpoint arrived in it) gets the latest setpoint repeated, sent by the
+  tick that closes it, while that setpoint is younger than ``setpoint_timeout``.
+
+So a controller publishing at ``stream_rate`` has each of its setpoints sent once, at once, and nothing else (no
+doubled frames); a slower or stalled one is topped up with repetitions to ``stream_rate``; a faster one is thinned
+to it. (Before issue 13 every new setpoint was sent at once AND again by the tick: twice the configured rate.)
 
 Setpoint time: each SET_ATTITUDE_TARGET carries in ``time_boot_ms`` the SETPOINT's own instant (the
 ``AttitudeThrustSetpoint`` header stamp, the controller's control instant) put on PX4's boot clock by the
@@ -51,6 +65,8 @@ __all__ = ["BridgeConfig", "BridgeStatus", "Px4Bridge", "SetpointResult"]
 
 #: A battery voltage older than this is not used for the thrust normalization [s].
 _VOLTAGE_MAX_AGE = 5.0
+#: A tick opens a new stream slot only this many stream periods after the tick that opened the current one.
+_SLOT_MIN = 0.6
 
 
 @dataclass(frozen=True)
@@ -146,10 +162,14 @@ class Px4Bridge:
         self.telemetry = TelemetryDecoder(SimulationBootClock() if config.px4_boot_clock == "ros_time" else None)
         self.boot_time = boot_time  # local time that our time_boot_ms counts from
         self._setpoint: _Setpoint | None = None
+        self._setpoint_unsent = False  #: the latest setpoint has not been transmitted yet
+        self._slot_start: float | None = None  #: [s] the tick that opened the current stream slot
+        self._slot_used = False  #: a SET_ATTITUDE_TARGET was sent in the current slot
         self._last_heartbeat_sent = -math.inf
         self._sent_times: deque[float] = deque()
         self.rejected_setpoints = 0
         self.setpoints_sent = 0
+        self.repetitions_sent = 0  #: SET_ATTITUDE_TARGETs that repeated an already sent setpoint (slot top-ups)
         self.voltage_fallbacks = 0
         self.stamp_fallbacks = 0  #: setpoints whose header stamp could not be used (not 0, but invalid)
         self._pending_events: list[LogEvent] = []
@@ -188,9 +208,10 @@ class Px4Bridge:
             return SetpointResult(accepted=False, sent=False, reason=reason)
         self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now,
                                    time_boot_ms=self.setpoint_time_boot_ms(stamp, now))
+        self._setpoint_unsent = True
         sent = False
-        if self.machine.stream_allowed():
-            sent = self._send_setpoint(now)
+        if self.machine.stream_allowed() and not self._slot_used:
+            sent = self._transmit(now)  # else held: the tick opening the next slot sends it (module doc)
         return SetpointResult(accepted=True, sent=sent)
 
     def setpoint_time_boot_ms(self, stamp: float, now: float) -> int:
@@ -248,6 +269,30 @@ class Px4Bridge:
         self._sent_times.append(now)
         return True
 
+    def _transmit(self, now: float) -> bool:
+        """Send the latest setpoint as the current slot's frame (first transmission or repetition)."""
+        repetition = not self._setpoint_unsent
+        if not self._send_setpoint(now):
+            return False
+        self._slot_used = True
+        self._setpoint_unsent = False
+        self.repetitions_sent += int(repetition)
+        return True
+
+    def _stream_slots(self, now: float, stream: bool) -> None:
+        """The tick's part of the stream-rate rule (module doc): at a slot boundary, top up the closing slot if it
+        carried no frame, open the next slot and send a held setpoint in it. ``stream``: the state machine streams
+        now (a fresh setpoint exists). Times [s]."""
+        period = 1.0 / self.config.stream_rate
+        if self._slot_start is not None and self._slot_start <= now < self._slot_start + _SLOT_MIN * period:
+            return  # too soon after the last boundary: timer jitter, or a caller ticking faster than stream_rate
+        if stream and not self._slot_used:
+            self._transmit(now)  # the closing slot's frame: a repetition (or a setpoint not sent before)
+        self._slot_start = now
+        self._slot_used = False
+        if stream and self._setpoint_unsent:
+            self._transmit(now)  # held new setpoint: the new slot's frame
+
     def setpoint_rate(self, now: float) -> float:
         """Measured SET_ATTITUDE_TARGET output rate over the last second [Hz]."""
         times = self._sent_times
@@ -260,10 +305,9 @@ class Px4Bridge:
         self.machine.on_teleop(mode, now)
 
     def tick(self, now: float) -> list[LogEvent]:
-        """Periodic step at ``stream_rate``: state machine, setpoint repetition, commands, HEARTBEAT."""
+        """Periodic step at ``stream_rate`` (time ``now`` [s]): state machine, stream slots, commands, HEARTBEAT."""
         decision = self.machine.step(now, self.setpoint_fresh(now))
-        if decision.stream:
-            self._send_setpoint(now)
+        self._stream_slots(now, decision.stream)
         cfg = self.config
         for command in decision.commands:
             self.link.send(self.link.mav.command_long_encode(
@@ -291,6 +335,8 @@ class Px4Bridge:
                 return None  # another component of the vehicle, not the autopilot
             self.machine.on_heartbeat(msg.base_mode, msg.custom_mode, now)
             return None
+        if msg.get_srcComponent() == self.config.target_component:
+            self.machine.on_frame(now)  # any frame from the autopilot proves it alive (PX4-silence rule)
         if kind == "COMMAND_ACK":
             self.machine.on_command_ack(msg.command, msg.result, now)
             return None

@@ -9,7 +9,12 @@ Connection URLs:
 Parsing never raises: every datagram (or serial chunk) is split into frames by the MAVLink 2 / 1 header, each
 frame is decoded alone, and bad prefixes, truncations, CRC errors, unknown ids and refused signatures are
 counted in :class:`LinkCounters`. With signing on (a 32-byte secret key), unsigned or wrongly signed frames
-are refused and counted; outgoing frames are signed.
+are refused and counted; outgoing frames are signed. Signing timestamp (MAVLink 2 signing spec: 10 µs units since
+2015-01-01 00:00 UTC, following the wall clock, strictly increasing per (link id, system, component)): set before
+EVERY outgoing frame to max(wall-clock timestamp, last + 1). pymavlink alone sets it once and then only adds 1 per
+frame (``MAVLink_message.sign_packet``), so a link sending ~100 frames/s would fall behind the wall clock by nearly
+the whole elapsed time (25 s after 25 s), and a receiver judging new streams against its own clock (pymavlink
+accepts a new stream at most 60 s behind) would eventually refuse it.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import os
 import select
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import urlparse
 
@@ -205,8 +211,10 @@ class MavlinkLink:
 
     def __init__(self, url: str, system_id: int = 245, component_id: int = MAV_COMP_ID_ONBOARD_COMPUTER,
                  target_system: int = 1, baud: int = 921600, signing_key: bytes | None = None,
-                 signing_link_id: int = 0) -> None:
+                 signing_link_id: int = 0, wall_clock: Callable[[], float] = time.time) -> None:
+        """``wall_clock``: UTC Unix time [s] for the signing timestamps (a fake one in tests)."""
         self.spec = parse_connection_url(url)
+        self.wall_clock = wall_clock
         self.target_system = int(target_system)
         self.counters = LinkCounters()
         self.mav = mavlink.MAVLink(_DatagramWriter(self), srcSystem=int(system_id), srcComponent=int(component_id))
@@ -216,7 +224,7 @@ class MavlinkLink:
                 raise ValueError("MAVLink 2 signing key must be 32 bytes")
             self.mav.signing.secret_key = bytes(signing_key)
             self.mav.signing.link_id = int(signing_link_id) & 0xFF
-            self.mav.signing.timestamp = signing_timestamp()
+            self.mav.signing.timestamp = signing_timestamp(wall_clock())
             self.mav.signing.sign_outgoing = True
             self.mav.signing.allow_unsigned_callback = None  # refuse every unsigned frame
         self._sock: socket.socket | None = None
@@ -286,8 +294,16 @@ class MavlinkLink:
         if self._sock is not None and self._peer is None:
             return False
         before = self.counters.tx_frames
+        if self.signing:
+            self._update_signing_timestamp()
         self.mav.send(msg)
         return self.counters.tx_frames > before
+
+    def _update_signing_timestamp(self) -> None:
+        """Next signed frame: max(wall-clock timestamp, last + 1). pymavlink signs with ``signing.timestamp`` and
+        then adds 1 (so it already holds last + 1), and raises it to any newer timestamp it accepts from a peer."""
+        signing = self.mav.signing
+        signing.timestamp = max(signing_timestamp(self.wall_clock()), int(signing.timestamp))
 
     # ---- reception ---------------------------------------------------------------------------------------
     def receive(self, timeout: float = 0.0, max_datagrams: int = 256) -> list:

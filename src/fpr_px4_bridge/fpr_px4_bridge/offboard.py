@@ -1,8 +1,9 @@
 """Arming / offboard state machine of one bridge (ROS-free, explicit time, no I/O).
 
 Inputs: the operator's mode (``TeleopCommand.mode``: IDLE, ARM, FLY, LAND, KILL), PX4 HEARTBEATs (armed flag,
-custom mode), COMMAND_ACKs, and whether a fresh setpoint exists. Output of :meth:`OffboardStateMachine.step`:
-whether to stream setpoints now, which COMMAND_LONGs to send, and log events.
+custom mode), every other frame from PX4 (proof of life), COMMAND_ACKs, and whether a fresh setpoint exists.
+Output of :meth:`OffboardStateMachine.step`: whether to stream setpoints now, which COMMAND_LONGs to send, and
+log events.
 
 States (``UavStatus.STATE_*``): IDLE -> ARMING (COMPONENT_ARM_DISARM, retried) -> WARMUP (streaming; with FLY,
 after ``offboard_warmup`` >= 1 s of continuous stream: DO_SET_MODE OFFBOARD, retried until the HEARTBEAT shows
@@ -10,7 +11,18 @@ OFFBOARD, spec px4_ros_facts.md §1.4-1.5) -> OFFBOARD. LAND -> LANDING (DO_SET_
 HEARTBEAT shows it; IDLE once disarmed). KILL -> KILLED (forced disarm, optionally flight termination, latched
 until IDLE). FAILSAFE: in OFFBOARD the setpoints went stale (the stream stops so that PX4's own offboard-loss
 failsafe acts) or PX4 left OFFBOARD / disarmed on its own; latched until the operator changes the mode.
-DISCONNECTED is reported whenever no HEARTBEAT arrived for ``heartbeat_timeout``; the state underneath is kept.
+DISCONNECTED ("PX4 silent") is reported whenever no frame at all came from PX4 for ``heartbeat_timeout`` (0.45 s;
+PX4 streams telemetry at >= 50 Hz but HEARTBEAT only at 1-2 Hz, so silence is judged on ANY frame from the
+autopilot, not on HEARTBEATs; the next tick logs it: within 0.5 s of the last frame at 50 Hz), and until the
+first HEARTBEAT; the state underneath is kept. While silent, command retries are held.
+
+Order, ARM first and OFFBOARD after: PX4's offboard examples request OFFBOARD first and then arm; PX4 accepts
+both (it takes DO_SET_MODE OFFBOARD while disarmed once a setpoint stream is present). Kept deliberately: (1) a
+refused ARM (pre-flight checks, safety switch) ends the sequence with PX4 still in the pilot's mode, never left
+disarmed in OFFBOARD, where a later arm from anywhere would put the controller's thrust on the motors at once;
+(2) the OFFBOARD switch, the moment the FPR controller takes the thrust, comes only once PX4 reports armed and the
+stream has run ``offboard_warmup`` (the stream already runs while ARMING, so PX4's proof-of-life rule is met
+either way); (3) the simulator's PX4 emulator, the tests and the recorded results use this sequence.
 
 Disarming: the bridge never disarms on its own initiative. It starts in IDLE and, when PX4 is already armed (a
 scenario that starts hovering, or a bridge restarted in flight), only reports PX4's state (armed, mode) and waits
@@ -69,7 +81,9 @@ class TeleopMode(IntEnum):
 
 @dataclass(frozen=True)
 class OffboardConfig:
-    heartbeat_timeout: float = 1.5       #: [s] no PX4 HEARTBEAT for this long -> disconnected
+    #: [s] no frame at all from PX4 for this long -> "PX4 silent" (DISCONNECTED), seen at the next tick: with the
+    #: 50 Hz tick, reported within 0.45 + 0.02 < 0.5 s of PX4's last frame (the project's target)
+    heartbeat_timeout: float = 0.45
     offboard_warmup: float = 1.2         #: [s] continuous stream before DO_SET_MODE OFFBOARD (PX4 wants > 1 s)
     command_retry_interval: float = 0.5  #: [s] between retries of an unconfirmed command
     command_max_attempts: int = 6        #: attempts of ARM / OFFBOARD / LAND before giving up (kill never gives up)
@@ -128,7 +142,8 @@ class OffboardStateMachine:
         self.config = config or OffboardConfig()
         self.mode = TeleopMode.IDLE
         self._state = BridgeState.IDLE
-        self._last_heartbeat: float | None = None
+        self._last_heartbeat: float | None = None  #: [s] last HEARTBEAT from the autopilot
+        self._last_frame: float | None = None  #: [s] last frame of any kind from the autopilot
         self.armed = False
         self.px4_mode: Px4Mode = decode_custom_mode(0)
         self.custom_mode = 0
@@ -155,10 +170,15 @@ class OffboardStateMachine:
         return self._state if self.connected(now) else BridgeState.DISCONNECTED
 
     def connected(self, now: float) -> bool:
-        return self._last_heartbeat is not None and now - self._last_heartbeat <= self.config.heartbeat_timeout
+        """A HEARTBEAT has been seen and the last frame from PX4 is at most ``heartbeat_timeout`` old."""
+        return (self._last_heartbeat is not None and self._last_frame is not None
+                and now - self._last_frame <= self.config.heartbeat_timeout)
 
     def link_age(self, now: float) -> float:
-        return float("inf") if self._last_heartbeat is None else max(0.0, now - self._last_heartbeat)
+        """[s] since the last frame from PX4 (any message); inf before the first HEARTBEAT."""
+        if self._last_heartbeat is None or self._last_frame is None:
+            return float("inf")
+        return max(0.0, now - self._last_frame)
 
     @property
     def failsafe(self) -> bool:
@@ -176,9 +196,15 @@ class OffboardStateMachine:
             self._seen_offboard = False
             self._seen_land = False
 
+    def on_frame(self, now: float) -> None:
+        """Any accepted frame from the PX4 autopilot at ``now`` [s] (telemetry, ACK, HEARTBEAT): proof of life."""
+        if self._last_frame is None or now > self._last_frame:
+            self._last_frame = now
+
     def on_heartbeat(self, base_mode: int, custom_mode: int, now: float) -> None:
-        """A HEARTBEAT from the PX4 autopilot."""
+        """A HEARTBEAT from the PX4 autopilot (also a frame: :meth:`on_frame`)."""
         self._last_heartbeat = now
+        self.on_frame(now)
         armed = is_armed(base_mode)
         mode = decode_custom_mode(custom_mode)
         if mode.name != self.px4_mode.name and self.custom_mode_seen:
@@ -256,10 +282,11 @@ class OffboardStateMachine:
         connected = self.connected(now)
         if connected != self._was_connected:
             if connected:
-                self._event("info", "link.up", f"PX4 HEARTBEAT received: connected (mode {self.px4_mode.name})")
+                self._event("info", "link.up", f"PX4 link up: connected (mode {self.px4_mode.name})")
             elif self._last_heartbeat is not None:
                 self._event("warn", "link.down",
-                            f"no PX4 HEARTBEAT for {self.link_age(now):.2f} s: DISCONNECTED")
+                            f"PX4 silent / disconnected: no frame from PX4 for {self.link_age(now):.2f} s "
+                            f"(heartbeat_timeout {self.config.heartbeat_timeout:g} s): DISCONNECTED")
             self._was_connected = connected
         state = self._state
         offboard = self.px4_mode.is_offboard
@@ -279,6 +306,8 @@ class OffboardStateMachine:
                   and now - self._stream_since >= self.config.offboard_warmup):
                 if self.offboard_requested_at is None:
                     self.offboard_requested_at = now
+                # OFFBOARD after arming (PX4's examples: before; PX4 accepts both): a refused ARM never leaves PX4
+                # disarmed in OFFBOARD, and the controller gets the thrust only once armed (module doc, "Order")
                 if not self._request(SET_OFFBOARD, now, decision):
                     self._enter(BridgeState.FAILSAFE, "error",
                                 f"PX4 did not enter OFFBOARD after {self.config.command_max_attempts} requests")

@@ -53,7 +53,8 @@ _PARAMETERS = {
                                    "(the first Exp. I flights, thesis §3.5.1)"),
     "nominal_voltage": (12.4, "[V] f_max voltage when battery_compensation is false (charged 3S)"),
     "quaternion_tolerance": (1e-3, "setpoints with | |q| - 1 | above this are refused"),
-    "heartbeat_timeout": (1.5, "[s] no PX4 HEARTBEAT for this long: DISCONNECTED"),
+    "heartbeat_timeout": (0.45, "[s] no frame at all from PX4 (telemetry, HEARTBEAT, ACK) for this long: 'PX4 "
+                                "silent', DISCONNECTED (logged at the next stream tick: < 0.5 s at 50 Hz)"),
     "offboard_warmup": (1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)"),
     "command_retry_interval": (0.5, "[s] between retries of unconfirmed ARM / OFFBOARD / LAND / KILL commands"),
     "command_max_attempts": (6, "attempts of ARM / OFFBOARD / LAND before giving up (KILL retries forever)"),

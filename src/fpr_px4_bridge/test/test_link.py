@@ -146,3 +146,59 @@ def test_serial_stream_reassembles_frames_across_chunks():
     finally:
         link.close()
         os.close(write_fd)
+
+
+def _signed_receiver(timestamp: int):
+    """pymavlink with the same key, as PX4 or a GCS would check the frames; ``timestamp``: its own clock."""
+    receiver = mavlink.MAVLink(None)
+    receiver.signing.secret_key = KEY
+    receiver.signing.timestamp = timestamp
+    return receiver
+
+
+def _signing_timestamp_of(frame: bytes) -> int:
+    return int.from_bytes(frame[-12:-6], "little")
+
+
+def test_signing_timestamps_follow_a_fake_wall_clock_and_strictly_increase():
+    """MAVLink 2 signing: each outgoing frame carries max(wall-clock timestamp, last + 1), 10 µs units since
+    2015-01-01. Fake wall clock: 5 s at 100 frames/s, a jump of 600 s, a burst of 1000 frames in one instant, 5 s
+    more; receivers with the same key (one listening throughout, one joining after the jump) accept every frame."""
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    sink.settimeout(1.0)
+    clock = [1_800_000_000.0]  # Unix time [s] (2027), advanced by hand
+    link = MavlinkLink(f"udpout://127.0.0.1:{sink.getsockname()[1]}", system_id=1, component_id=191,
+                       target_system=1, signing_key=KEY, signing_link_id=3, wall_clock=lambda: clock[0])
+    listener = _signed_receiver(signing_timestamp(clock[0]))
+    late = None
+    sent: list[tuple[float, int]] = []  # (fake wall time [s], signing timestamp)
+    heartbeat = link.mav.heartbeat_encode(type=18, autopilot=8, base_mode=0, custom_mode=0, system_status=4)
+    try:
+        def send(count: int, step: float) -> None:
+            nonlocal late
+            for _ in range(count):
+                assert link.send(heartbeat)
+                frame = sink.recv(65535)
+                assert frame[2] & 1 and frame[-13] == 3  # signed, link id 3
+                sent.append((clock[0], _signing_timestamp_of(frame)))
+                listener.decode(bytearray(frame))
+                if late is not None:
+                    late.decode(bytearray(frame))
+                clock[0] += step
+
+        send(500, 0.01)
+        clock[0] += 600.0
+        late = _signed_receiver(signing_timestamp(clock[0]))  # a receiver that joins now, on its own clock
+        send(1000, 0.0)
+        send(500, 0.01)
+    finally:
+        link.close()
+        sink.close()
+    stamps = [stamp for _, stamp in sent]
+    assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))  # strictly increasing
+    # within 1 s of the (fake) wall clock at every send (the 1000-frame burst runs ahead by 1000 × 10 µs)
+    assert max(abs(stamp * 1e-5 - (wall - 1420070400.0)) for wall, stamp in sent) < 1.0
+    assert stamps[-1] * 1e-5 + 1420070400.0 == pytest.approx(clock[0], abs=0.05)
+    assert listener.signing.goodsig_count == 2000 and listener.signing.badsig_count == 0
+    assert late.signing.goodsig_count == 1500 and late.signing.badsig_count == 0

@@ -219,10 +219,15 @@ def test_fly_stream_rate_offboard_after_warmup_and_stale_stop(graph):
     assert len(distinct) == len(expected), (distinct[:5], expected[:5])
     assert np.abs(distinct - expected).max() <= 1000.0 * 0.020, (distinct[:5], expected[:5])
     assert np.all(np.diff(boot_ms) >= 0) and len(boot_ms) > len(distinct)  # repetitions keep their stamp
-    # >= 50 Hz at the peer over the whole stream (simulation time)
+    # exactly 50 Hz at the peer over the whole stream (simulation time): one frame per stream period
     span = times[-1] - times[0]
-    assert span > 2.5 and len(times) - 1 >= STREAM_RATE * span, (len(times), span)
-    assert np.diff(times).max() <= 1.0 / STREAM_RATE + 1e-9  # no gap
+    assert span > 2.5 and abs(len(times) - 1 - STREAM_RATE * span) <= 1.0, (len(times), span)
+    # while the controller publishes at 50 Hz, each setpoint is sent once (no doubled frames), within a /clock
+    # step of its publication; repetitions only after the last one (until setpoint_timeout)
+    publishing = times < last_publish + 1.5 / STREAM_RATE  # the first repetition comes at +2 periods
+    assert len(np.unique(boot_ms[publishing])) == publishing.sum() == len(sim.published)
+    assert np.diff(times[publishing]).max() <= 1.0 / STREAM_RATE + CLOCK_STEP_NS * 1e-9 + 1e-9
+    assert np.diff(times).max() <= 2.0 / STREAM_RATE + 1e-9  # the first repetition: within two periods
     # OFFBOARD requested only after >= 1 s of stream (received at the peer, simulation time)
     set_modes = [c for c in fake.command_list() if c.msg.command == 176 and int(c.msg.param2) == 6]
     assert set_modes and set_modes[0].t - times[0] >= 1.0
@@ -282,13 +287,16 @@ def test_kill_and_disconnect(graph):
     kills = [c for c in fake.command_list() if c.msg.command == 400 and c.msg.param1 == 0.0]
     assert kills and kills[0].msg.param2 == 21196.0
     sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_KILLED, 0.5, "KILLED")
-    fake.send_heartbeats = False
+    fake.send_heartbeats = False  # HEARTBEATs alone stopping is not silence: the telemetry (20 Hz) goes on
+    sim.run_for(1.0)
+    assert statuses[-1].connected and statuses[-1].state == UavStatus.STATE_KILLED
+    fake.telemetry_rate = 0.0  # now PX4 is silent
     silent_at = sim.now
     lost_at = sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_DISCONNECTED
                             and not statuses[-1].connected, 3.0, "DISCONNECTED")
-    # heartbeat_timeout 1.5 s after the last HEARTBEAT (10 Hz), seen in the next status (20 Hz)
-    assert 1.5 - 0.1 <= lost_at - silent_at <= 1.5 + 0.05 + 0.05
-    assert statuses[-1].link_age >= 1.5
+    # heartbeat_timeout 0.45 s after the last frame (telemetry every 50 ms), seen in the next status (20 Hz)
+    assert 0.45 - 0.05 - 0.004 <= lost_at - silent_at <= 0.45 + 0.05 + 0.004
+    assert statuses[-1].link_age >= 0.45
 
 
 @pytest.mark.parametrize("sim_time, setting, expected", [

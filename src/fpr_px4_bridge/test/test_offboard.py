@@ -33,7 +33,7 @@ def test_starts_disconnected_then_idle_on_heartbeat():
     d = m.step(0.0, True)
     assert m.reported_state(0.0) == BridgeState.IDLE and not d.stream and not d.commands
     assert any(e.key == "link.up" for e in d.events)
-    # heartbeat_timeout 1.5 s -> DISCONNECTED with a warning
+    # heartbeat_timeout (0.45 s) without any frame -> DISCONNECTED with a warning
     d = m.step(1.6, True)
     assert m.reported_state(1.6) == BridgeState.DISCONNECTED
     assert any(e.level == "warn" and e.key == "link.down" for e in d.events)
@@ -257,3 +257,36 @@ def test_idle_after_kill_or_failed_arming_sends_no_plain_disarm():
     m.on_teleop(TeleopMode.IDLE, 0.1)  # unlatch KILL (PX4 still reports armed)
     steps = run(m, 0.1, 4.0, base=ARMED)
     assert "DISARM" not in _all_commands(steps) and m.state == BridgeState.IDLE
+
+
+def test_px4_silence_is_judged_on_any_frame_and_reported_within_half_a_second():
+    """Telemetry at 50 Hz with HEARTBEATs at 1 Hz keeps the link up; when every frame stops, the 50 Hz step
+    reports "PX4 silent" (DISCONNECTED, a warning) within 0.5 s of the last frame, and the next frame restores it."""
+    m = OffboardStateMachine()
+    assert m.config.heartbeat_timeout == 0.45
+    m.on_frame(0.0)
+    assert not m.connected(0.0)  # telemetry alone, before any HEARTBEAT: not connected yet
+    events = []
+    t = 0.0
+    for k in range(150):  # 3 s: HEARTBEAT every second, a telemetry frame every 20 ms
+        t = round(0.02 * k, 9)
+        if k % 50 == 0:
+            m.on_heartbeat(DISARMED, POSCTL, t)
+        else:
+            m.on_frame(t)
+        events += m.step(t, True).events
+        assert m.connected(t) and m.reported_state(t) == BridgeState.IDLE, t
+    last_frame = t
+    assert not any(e.key == "link.down" for e in events)
+    down_at = None
+    while down_at is None:
+        t = round(t + 0.02, 9)
+        down = [e for e in m.step(t, True).events if e.key == "link.down"]
+        if down:
+            down_at = t
+            assert down[0].level == "warn" and "PX4 silent" in down[0].text
+    assert 0.45 < down_at - last_frame <= 0.5 and m.reported_state(down_at) == BridgeState.DISCONNECTED
+    assert m.link_age(down_at) == pytest.approx(down_at - last_frame)
+    m.on_frame(down_at + 0.01)  # telemetry again: connected at once (the HEARTBEAT was seen before)
+    assert any(e.key == "link.up" for e in m.step(down_at + 0.02, True).events)
+    assert m.reported_state(down_at + 0.02) == BridgeState.IDLE
