@@ -413,19 +413,27 @@ class Px4Emulator:
                 break
             count += 1
             self.counters.datagrams += 1
+            self._reset_parser()  # UDP datagrams carry whole frames: a broken one must not eat the next
             try:
                 messages = self.mav.parse_buffer(data) or []
             except Exception:  # noqa: BLE001 - any parser failure is garbage, never a crash
                 self.counters.garbage += 1
-                self.mav.buf = bytearray()
-                self.mav.buf_index = 0
                 continue
+            if self.mav.buf_len() > 0:
+                self.counters.garbage += 1  # trailing bytes of no complete frame
             for msg in messages:
                 try:
                     self._handle(msg, address)
                 except (AttributeError, TypeError, ValueError, OverflowError):
                     self.counters.garbage += 1  # a field we cannot use: never a crash
         return count
+
+    def _reset_parser(self) -> None:
+        mav = self.mav
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = 8  # pymavlink's initial HEADER_LEN_V1 + 2
+        mav.have_prefix_error = False
 
     def _handle(self, msg, address) -> None:
         kind = msg.get_type()
