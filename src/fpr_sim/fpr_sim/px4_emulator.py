@@ -113,14 +113,15 @@ Modes (PX4 parameters emulated, :class:`~fpr_sim.scenario.Px4Config` field in br
 
 Telemetry (simulation time; :meth:`Px4Emulator.due_messages` / :meth:`Px4Emulator.send_messages`), each message
 on its own interval, changeable by SET_MESSAGE_INTERVAL; defaults = PX4's onboard link (mavlink_main.cpp
-configure_streams_to_default, MAVLINK_MODE_ONBOARD) except where the FPR graph needs more: HEARTBEAT 1 Hz,
-ATTITUDE 100 Hz, ATTITUDE_QUATERNION 50 Hz, HIGHRES_IMU 50 Hz, LOCAL_POSITION_NED 50 Hz (PX4: 30 Hz; the
-bridge needs attitude, IMU and local position at >= 50 Hz), SYS_STATUS 5 Hz, BATTERY_STATUS 0.5 Hz,
-EXTENDED_SYS_STATE 5 Hz (landed state ON_GROUND / TAKEOFF / IN_AIR / LANDING). HEARTBEAT: MAV_TYPE_QUADROTOR,
-MAV_AUTOPILOT_PX4, system id = UAV id, component 1, ``base_mode`` with CUSTOM_MODE_ENABLED (+ SAFETY_ARMED,
-+ AUTO|GUIDED|STABILIZE in OFFBOARD/AUTO, MANUAL_INPUT(+STABILIZE, +GUIDED) in the manual modes),
-``custom_mode`` = PX4 main/sub mode. Attitude, IMU and local position come from the sensor sample (F0i, NED/FRD
-on the wire). Boot clock: PX4 "boots" at simulation time 0, ``time_boot_ms`` = :func:`boot_time_ms`.
+configure_streams_to_default, MAVLINK_MODE_ONBOARD) except where the FPR graph needs more: HEARTBEAT 2 Hz (PX4:
+1 Hz; the bridges report PX4's mode from it and the graph expects a mode change seen within 0.5 s), ATTITUDE
+100 Hz, ATTITUDE_QUATERNION 50 Hz, HIGHRES_IMU 50 Hz, LOCAL_POSITION_NED 50 Hz (PX4: 30 Hz; the bridge needs
+attitude, IMU and local position at >= 50 Hz), SYS_STATUS 5 Hz, BATTERY_STATUS 0.5 Hz, EXTENDED_SYS_STATE 5 Hz
+(landed state ON_GROUND / TAKEOFF / IN_AIR / LANDING). HEARTBEAT: MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4, system
+id = UAV id, component 1, ``base_mode`` with CUSTOM_MODE_ENABLED (+ SAFETY_ARMED, + AUTO|GUIDED|STABILIZE in
+OFFBOARD/AUTO, MANUAL_INPUT(+STABILIZE, +GUIDED) in the manual modes), ``custom_mode`` = PX4 main/sub mode.
+Attitude, IMU and local position come from the sensor sample (F0i, NED/FRD on the wire). Boot clock: PX4
+"boots" at simulation time 0, ``time_boot_ms`` = :func:`boot_time_ms`.
 """
 
 from __future__ import annotations

@@ -399,10 +399,10 @@ def test_airborne_in_posctl_without_rc_triggers_the_rc_loss_failsafe():
 
 
 def test_auto_land_of_the_whole_fpr_from_2_m_ends_resting_and_disarmed():
-    """PX4's per-UAV AUTO.LAND cannot land an FPR gracefully: each UAV descends LEVEL, the legs lose the inward
-    thrust component that held them and fold while the robot falls (before the joint stops, −530° and a
-    diverging plant). With the stops it must at least end finite, at rest, on the ground and disarmed
-    (COM_DISARM_LAND), the legs within the stops (± a small penetration)."""
+    """PX4's per-UAV AUTO.LAND with its position controller: each UAV holds its x/y and descends at
+    MPC_LAND_SPEED, so the structure comes down in shape (formerly each UAV descended LEVEL and the legs folded
+    onto their stops). It must end finite, at rest, on the ground and disarmed (COM_DISARM_LAND), the legs
+    within the stops (± a small penetration)."""
     from fpr_model.rotations import quat_to_euler_zyx
 
     sim, clients = _swarm({"initial_state": {"mode": "hover", "position": [0.0, 0.0, 2.0],
