@@ -302,8 +302,8 @@ def _position_target(rig, uav, mask, frame=1, pos=(0.0, 0.0, 0.0), vel=(0.0, 0.0
                                                                  yaw, 0.0)
 
 
-VELOCITY_ONLY = 0b0000_1101_1100_0111  # ignore position, acceleration, yaw rate; velocity + yaw used
-POSITION_ONLY = 0b0000_1101_1111_1000  # ignore velocity, acceleration, yaw rate; position + yaw used
+VELOCITY_ONLY = 0b1001_1100_0111  # ignore position, acceleration, yaw rate: velocity + yaw used
+POSITION_ONLY = 0b1001_1111_1000  # ignore velocity, acceleration, yaw rate: position + yaw used
 
 
 def test_set_position_target_velocity_then_position_flies_the_fpr(hover):
@@ -388,3 +388,62 @@ def test_malformed_input_is_counted_and_never_crashes(ground):
     assert emulator.counters.garbage > garbage
     assert emulator.main_mode == POSCTL and not emulator.armed
     assert ground.command(1, REQUEST_MESSAGE, 0) == ACCEPTED  # still answering
+
+
+def test_position_target_frames_and_type_mask():
+    """LOCAL_NED -> F0i ENU; BODY_NED velocities along the heading (x forward, y right, z down); offsets from the
+    present position; ignored components are NaN (not used)."""
+    from fpr_sim.px4_emulator import Px4Emulator
+    from fpr_sim.scenario import Px4Config
+
+    emulator = Px4Emulator(1, Px4Config(), 0.0, local_port=0, remote_port=0)
+    try:
+        mav = mavutil.mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        address = ("127.0.0.1", 9)
+        yaw = np.radians(90.0)  # heading north (ENU)
+        emulator._attitude_local = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+        emulator.position_local = np.array([1.0, 2.0, 3.0])
+
+        def send(frame, mask, pos=(0.0, 0.0, 0.0), vel=(0.0, 0.0, 0.0), yaw_ned=0.0):
+            msg = mav.set_position_target_local_ned_encode(0, 1, 1, frame, mask, *pos, *vel, 0.0, 0.0, 0.0, yaw_ned,
+                                                           0.0)
+            emulator._handle(mavutil.mavlink.MAVLink(None).parse_char(msg.pack(mav)), address)
+            return emulator.position_target
+
+        target = send(1, POSITION_ONLY, pos=(1.0, 2.0, -3.0), yaw_ned=0.0)  # NED north 1, east 2, up 3
+        assert np.allclose(target.position, [2.0, 1.0, 3.0]) and np.isnan(target.velocity).all()
+        assert target.yaw == pytest.approx(np.pi / 2)  # facing north
+        target = send(8, VELOCITY_ONLY, vel=(1.0, 0.5, -0.2), yaw_ned=0.0)  # forward 1, right 0.5, up 0.2
+        assert np.allclose(target.velocity, [0.5, 1.0, 0.2])  # heading north: right = east
+        assert target.yaw == pytest.approx(yaw)  # body yaw 0 = keep the heading
+        target = send(7, POSITION_ONLY & ~0b100 | 0b100, pos=(1.0, 0.0, 0.0))  # offset north 1, z ignored
+        assert np.allclose(target.position[:2], [1.0, 3.0]) and np.isnan(target.position[2])
+        assert emulator.counters.setpoints == 3 and emulator.setpoint_time_ms is not None
+    finally:
+        emulator.close()
+
+
+def test_px4_default_horizontal_gains_let_the_hover_fpr_collapse_in_hold():
+    """Why Px4Config.position_control is stiffer than PX4's defaults: with MPC_XY_P 0.95 / MPC_XY_VEL_P_ACC 1.8 the
+    weight of the structure (platform above the UAVs, legs at 45°) beats the UAVs' horizontal position loops and
+    the legs oscillate and collapse in Hold within 10 s, though every UAV holds its altitude."""
+    scenario = dict(HOVER, px4=dict(HOVER["px4"], position_control={"xy_p": 0.95, "xy_vel_p": 1.8}))
+    rig = Rig(scenario)
+    try:
+        sim = rig.sim
+        rig.advance(1.0, every=rig.attitude_setpoints)
+        for uav in (1, 2, 3):
+            assert rig.command(uav, SET_MODE, 1, AUTO, LOITER) == ACCEPTED
+        legs0 = sim.ground_truth().state.leg_angles.copy()
+        uav_z0 = sim.ground_truth().uav_positions[:, 2].copy()
+        legs, uav_z = 0.0, 0.0
+        for _ in range(100):
+            rig.advance(0.1)
+            truth = sim.ground_truth()
+            legs = max(legs, float(np.abs(truth.state.leg_angles - legs0).max()))
+            uav_z = max(uav_z, float(np.abs(truth.uav_positions[:, 2] - uav_z0).max()))
+        assert legs > np.radians(20.0) and uav_z < 0.1
+        print(f"\n[hold, PX4 default MPC_XY gains] legs moved up to {np.degrees(legs):.1f} deg, UAV |dz| max "
+              f"{1000 * uav_z:.1f} mm")
+    finally:
+        rig.close()
