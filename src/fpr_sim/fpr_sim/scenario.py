@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from fpr_sim.px4_position_control import PositionControlConfig
+
 __all__ = [
     "BatteryConfig",
     "BoardConfig",
@@ -118,17 +120,40 @@ class Px4Config:
     rate_integrator_limit: float = 0.3  #: |K_I ∫ε| bound [N m]
     max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
     controller_rate: float = 250.0  #: attitude/rate loop [Hz]
-    offboard_loss_timeout: float = 1.0  #: COM_OF_LOSS_T [s]
-    offboard_min_rate: float = 2.0  #: setpoint stream must be faster than this [Hz]
-    offboard_warmup: float = 1.0  #: stream duration required before OFFBOARD or arming [s]
-    failsafe_hold_time: float = 2.0  #: hold (last attitude, hover thrust) before landing [s]
-    land_descent_thrust_ratio: float = 0.9  #: LAND: thrust = ratio · hover thrust of the attached UAV
+    offboard_loss_timeout: float = 1.0  #: COM_OF_LOSS_T [s]: offboard signal = a setpoint younger than this
+    failsafe_hold_time: float = 2.0  #: offboard/RC loss: Hold this long before Land [s] (PX4 COM_FAIL_ACT_T)
     land_disarm_delay: float = 2.0  #: COM_DISARM_LAND: disarm after this long landed (LAND, or after flight) [s]
     disarm_preflight_timeout: float = 10.0  #: COM_DISARM_PRFLT: disarm if armed this long without take-off [s]
     rc_loss_timeout: float = 0.5  #: COM_RC_LOSS_T: airborne in a manual-like mode, no RC -> failsafe after [s]
+    #: accept ARM and mode switches into modes that need manual control (POSCTL, ALTCTL, ...) without RC. PX4
+    #: refuses both (modeCheck.cpp clears the arming and can-run bits of those modes without manual control,
+    #: whatever COM_RC_IN_MODE); True keeps fpr_px4_bridge's flow (ARM in POSCTL, then OFFBOARD) working
+    manual_modes_without_rc: bool = True
+    land_speed: float = 0.7  #: MPC_LAND_SPEED [m/s] AUTO.LAND descent (below MPC_LAND_ALT2)
+    takeoff_speed: float = 1.5  #: MPC_TKO_SPEED [m/s] AUTO.TAKEOFF climb
+    takeoff_altitude: float = 2.5  #: MIS_TAKEOFF_ALT [m] above the take-off point
+    land_detector_time: float = 1.0  #: LNDMC_TRIG_TIME [s] low thrust and no vertical motion -> landed
+    land_detector_z_vel: float = 0.5  #: LNDMC_Z_VEL_MAX [m/s] "no vertical motion"
+    #: the multicopter position controller (MPC_* parameters, fpr_sim.px4_position_control): PX4's defaults but a
+    #: stiffer horizontal loop, MPC_XY_P 1.8 (PX4 0.95, range 0-2) and MPC_XY_VEL_P_ACC 3.0 (PX4 1.8, range 1.2-5):
+    #: with PX4's defaults the hover scenario (legs 45°, platform above the UAVs) collapses in Hold within 10 s, the
+    #: structure's weight acting on the UAVs' horizontal positions as a negative stiffness larger than the loop's
+    #: (test_px4_gcs.py). The FPR's PX4s are tuned for the attached vehicles, as their attitude gains are.
+    position_control: PositionControlConfig = field(
+        default_factory=lambda: PositionControlConfig(xy_p=1.8, xy_vel_p=3.0))
     yaw_offsets: list[float] = field(default_factory=lambda: [0.0])  #: F0i yaw offset per UAV [rad]
-    telemetry_rate: float = 50.0  #: ATTITUDE/…/HIGHRES_IMU stream rate [Hz]
-    status_rate: float = 2.0  #: HEARTBEAT, SYS_STATUS, BATTERY_STATUS rate [Hz]
+    # Stream rates [Hz] of PX4's onboard MAVLink link (mavlink_main.cpp, MAVLINK_MODE_ONBOARD); each can be changed
+    # at run time by MAV_CMD_SET_MESSAGE_INTERVAL. 0 disables a stream.
+    #: HEARTBEAT (PX4: 1 Hz on every link; 2 Hz here: fpr_px4_bridge reports PX4's mode from it and the graph
+    #: expects a mode change seen within 0.5 s, tests/test_bridge_emulator.py, test_swarm_flight.py)
+    heartbeat_rate: float = 2.0
+    attitude_rate: float = 100.0  #: ATTITUDE (PX4 onboard: 100 Hz)
+    attitude_quaternion_rate: float = 50.0  #: ATTITUDE_QUATERNION (PX4 onboard: 50 Hz)
+    highres_imu_rate: float = 50.0  #: HIGHRES_IMU (PX4 onboard: 50 Hz)
+    local_position_rate: float = 50.0  #: LOCAL_POSITION_NED (PX4 onboard: 30 Hz; the FPR bridge needs 50 Hz)
+    sys_status_rate: float = 5.0  #: SYS_STATUS (PX4 onboard: 5 Hz)
+    battery_status_rate: float = 0.5  #: BATTERY_STATUS (PX4 onboard: 0.5 Hz)
+    extended_sys_state_rate: float = 5.0  #: EXTENDED_SYS_STATE (PX4 onboard: 5 Hz)
 
 
 @dataclass

@@ -1,8 +1,10 @@
 """The simulator core (ROS-free): plant + one PX4 emulator per UAV + sensors, with lockstep (DESIGN.md §5).
 
-Time base: the plant's fixed step (1 ms). Each step: the emulators read MAVLink and run their mode logic at the
-PX4 controller rate (250 Hz) and feed the attitude controllers; telemetry goes out at ``telemetry_rate`` and
-status at ``status_rate`` (simulation time).
+Time base: the plant's fixed step (1 ms). Each step: the emulators read MAVLink and run their mode logic (and,
+in the position-controlled modes, their position controllers, fed with each vehicle's true position and velocity
+in its own frame F0i) at the PX4 controller rate (250 Hz) and feed the attitude controllers; after each step
+every emulator sends the telemetry messages that are due, each on its own interval (simulation time; PX4's
+onboard-link rates, changeable by SET_MESSAGE_INTERVAL, see :mod:`fpr_sim.px4_emulator`).
 
 Lockstep (DESIGN.md §5): at every control-period boundary T_k (``control_rate``, 50 Hz) the simulation does not
 advance until every UAV whose setpoint stream is live has a setpoint NEW for that period, or ``lockstep_timeout``
@@ -120,8 +122,6 @@ class Simulation:
         self.ports = [e.port for e in self.emulators]
         self._steps_per_control = max(1, int(round(self.options.physics_rate / self.options.control_rate)))
         self._steps_per_px4 = max(1, int(round(self.options.physics_rate / scenario.px4.controller_rate)))
-        self._steps_per_telemetry = max(1, int(round(self.options.physics_rate / scenario.px4.telemetry_rate)))
-        self._steps_per_status = max(1, int(round(self.options.physics_rate / scenario.px4.status_rate)))
         self._previous_boundary_ms = 0  # T_{k-1} on the PX4 boot clock [ms]
         self._served_ms: list[int | None] = [None] * n  # latest setpoint instant when T_{k-1} was passed [ms]
         self._stream_live = [False] * n  # a new setpoint arrived during the previous control period
@@ -137,9 +137,9 @@ class Simulation:
         self._truth = truth
         if scenario.initial_state.mode == "hover" and scenario.initial_state.armed:
             self._start_hovering()
-        # PX4 reports its status (battery voltage included) from boot: the first BATTERY_STATUS / SYS_STATUS go out
-        # at t = 0, so a bridge normalizes thrust with the real voltage from the start (no fallback-voltage step).
-        self._send_telemetry(status=True)
+        # PX4 reports its status (battery voltage included) from boot: every stream's first message goes out at
+        # t = 0, so a bridge normalizes thrust with the real voltage from the start (no fallback-voltage step).
+        self._send_telemetry()
 
     def _start_hovering(self) -> None:
         """Armed in OFFBOARD with the hover setpoint held (as if the stream had been running)."""
@@ -158,7 +158,6 @@ class Simulation:
             emulator.quat_local = self.sensors.world_to_local_quat(i, quats[i])
             emulator.thrust = float(np.linalg.norm(forces[i]) / f_max[i])
             emulator._last_setpoint_time = 0.0
-            emulator._stream_start = -emulator.config.offboard_warmup
 
     # ------------------------------------------------------------------------------------------------
     @property
@@ -179,10 +178,21 @@ class Simulation:
     def _px4_update(self) -> None:
         t = self.plant.time
         landed = self._landed()
+        for emulator in self.emulators:
+            emulator.poll(t)
+        positions = velocities = None
+        if any(e.uses_position_control for e in self.emulators):
+            # the position controllers' local position estimate: the true tip states in each F0i (ENU)
+            tip_pos, tip_vel = self.plant._tip_kinematics(self.plant._x)
+            R, origins = self.sensors.world_to_local_R, self.sensors.origins
+            positions = np.einsum("nij,nj->ni", R, tip_pos - origins)
+            velocities = np.einsum("nij,nj->ni", R, tip_vel)
         quats, thrusts, armed, feedforward = [], [], [], []
         for i, emulator in enumerate(self.emulators):
-            emulator.poll(t)
-            setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i])
+            if positions is not None and emulator.uses_position_control:
+                setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i], positions[i], velocities[i])
+            else:
+                setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i])
             quats.append(setpoint.quat)
             thrusts.append(setpoint.thrust)
             armed.append(setpoint.armed)
@@ -190,17 +200,24 @@ class Simulation:
         self.plant.set_command(AttitudeCommand(np.array(quats), np.array(thrusts), np.array(armed, dtype=bool),
                                                np.array(feedforward)))
 
-    def _send_telemetry(self, status: bool) -> None:
-        truth = self.plant.ground_truth()
-        self._truth = truth
-        battery = self.plant.fleet.battery
+    def _send_telemetry(self) -> None:
+        """Every emulator's telemetry due now (each message on its own interval, see :mod:`fpr_sim.px4_emulator`);
+        one sensor sample per UAV and instant serves all of its attitude / IMU / position messages."""
+        t = self.plant.time
+        truth = None
         for i, emulator in enumerate(self.emulators):
-            sample = self.sensors.sample(i, truth.uav_quats[i], truth.uav_rates[i], truth.uav_specific_forces[i],
-                                         truth.uav_positions[i], truth.uav_velocities[i])
-            emulator.send_telemetry(sample, truth.time)
-            if status:
-                emulator.send_status(float(truth.battery_voltages[i]), float(truth.battery_remaining[i]),
-                                     float(battery.current[i]))
+            due = emulator.due_messages(t)
+            if not due and not emulator.has_requests:
+                continue
+            if truth is None:
+                truth = self.plant.ground_truth()
+                self._truth = truth
+            sample = None
+            if emulator.needs_sample(due):
+                sample = self.sensors.sample(i, truth.uav_quats[i], truth.uav_rates[i], truth.uav_specific_forces[i],
+                                             truth.uav_positions[i], truth.uav_velocities[i])
+            emulator.send_messages(due, truth.time, sample, float(truth.battery_voltages[i]),
+                                   float(truth.battery_remaining[i]), float(self.plant.fleet.battery.current[i]))
 
     def _expects_setpoint(self, i: int) -> bool:
         """Lockstep waits for UAV i: its stream is live, has not ended, and is on the simulation's clock (module
@@ -286,9 +303,7 @@ class Simulation:
         if k % self._steps_per_px4 == 0:
             self._px4_update()
         self.plant.step()
-        k += 1
-        if k % self._steps_per_telemetry == 0:
-            self._send_telemetry(status=k % self._steps_per_status == 0)
+        self._send_telemetry()
 
     def advance(self, duration: float) -> None:
         """Run ``duration`` seconds of simulation time (rounded to whole physics steps)."""
