@@ -56,7 +56,9 @@ __all__ = [
     "SensorConfig",
     "TargetConfig",
     "WindConfig",
+    "bundled_scenarios_dir",
     "load_scenario",
+    "scenario_path",
     "scenario_from_dict",
 ]
 
@@ -587,12 +589,44 @@ def _validate_payload(payload: PayloadEvent, name: str) -> None:
         raise ValueError(f"{name}.pickup_radius: must be finite and > 0 [m], got {payload.pickup_radius}")
 
 
+def bundled_scenarios_dir() -> str:
+    """fpr_sim's own scenarios (``share/fpr_sim/config/scenarios`` once installed, else the source tree's)."""
+    import os
+
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+        installed = os.path.join(get_package_share_directory("fpr_sim"), "config", "scenarios")
+        if os.path.isdir(installed):
+            return installed
+    except (ImportError, PackageNotFoundError, ValueError):
+        pass
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config", "scenarios")
+
+
+def scenario_path(name: str) -> str:
+    """The file of scenario ``name``: a path to a YAML file, or the name of a bundled scenario with or without
+    ``.yaml`` (``hover``, ``ground_start.yaml``). An unknown name raises FileNotFoundError listing the bundled ones."""
+    import os
+
+    if os.path.isfile(name):
+        return name
+    directory = bundled_scenarios_dir()
+    base = os.path.basename(name)
+    candidate = os.path.join(directory, base if base.endswith((".yaml", ".yml")) else base + ".yaml")
+    if os.sep not in name and os.path.isfile(candidate):
+        return candidate
+    names = sorted(f[:-5] for f in os.listdir(directory) if f.endswith(".yaml")) if os.path.isdir(directory) else []
+    raise FileNotFoundError(f"scenario {name!r}: no such file, nor a bundled scenario; bundled: {', '.join(names)}")
+
+
 def load_scenario(path: str | None) -> Scenario:
-    """Load a scenario YAML file; ``None`` or an empty path gives the default scenario."""
+    """Load a scenario YAML file (a path or a bundled scenario's name, :func:`scenario_path`); ``None`` or an empty
+    path gives the default scenario."""
     if not path:
         return scenario_from_dict({})
     import yaml
 
-    with open(path, encoding="utf-8") as stream:
+    with open(scenario_path(path), encoding="utf-8") as stream:
         data = yaml.safe_load(stream)
     return scenario_from_dict(data or {})

@@ -46,7 +46,9 @@ class SimulatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("simulator", **kwargs)
         p = self.declare_parameter
-        p("scenario_file", "", descriptor=_desc("scenario YAML (see config/scenarios); empty: default scenario"))
+        p("scenario_file", "", descriptor=_desc(
+            "scenario YAML: a path, or a bundled scenario's name (config/scenarios: hover, ground_start, ...); empty: "
+            "default scenario"))
         p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
         p("lockstep", True, descriptor=_desc(
             "wait at each control period for every streaming UAV's setpoint computed for that period"))
@@ -308,7 +310,12 @@ def main(args=None) -> None:
 
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        node = SimulatorNode()
+        try:
+            node = SimulatorNode()
+        except (FileNotFoundError, ValueError) as error:  # a scenario or parameter error: one line, no traceback
+            print(f"[simulator] error: {error}", file=sys.stderr)
+            status = 2
+            return
         node.run()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -322,8 +329,8 @@ def main(args=None) -> None:
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
-    if status:
-        sys.exit(status)
+        if status:
+            sys.exit(status)
 
 
 if __name__ == "__main__":

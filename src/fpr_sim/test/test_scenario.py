@@ -80,3 +80,13 @@ def test_fan_board_and_target_defaults_keep_the_former_behaviour():
     assert custom.board.size == [0.3, math.inf] and custom.target.yaw == 0.3
     with pytest.raises(ValueError, match="wind.fan.position"):
         scenario_from_dict({"wind": {"fan": {"position": 3.0}}})
+
+
+def test_bundled_scenarios_resolve_by_name_with_or_without_yaml():
+    from fpr_sim.scenario import scenario_path
+
+    assert load_scenario("hover").name == "hover"
+    assert load_scenario("ground_start.yaml").name == "ground_start"
+    assert scenario_path("hover").endswith("hover.yaml")
+    with pytest.raises(FileNotFoundError, match=r"scenario 'hoover': no such file.*bundled: .*ground_start.*hover"):
+        load_scenario("hoover")

@@ -144,3 +144,15 @@ def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
     assert "Traceback" not in output and "RCLError" not in output, output
     expected = resolve_kernel(os.environ.get(KERNEL_ENV), 3)
     assert f"plant kernel: {expected} (" in output, output
+
+
+def test_simulator_process_with_an_unknown_scenario_says_so_in_one_line_and_exits_2():
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", "scenario_file:=hoover"],
+                            capture_output=True, text=True, timeout=60.0)
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "scenario 'hoover'" in lines[0] and "hover" in lines[0], result.stderr
+    assert "Traceback" not in result.stderr + result.stdout
