@@ -43,6 +43,29 @@ Q_NORTH = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))
 ARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | p.MAV_MODE_FLAG_SAFETY_ARMED
 
 
+
+
+def _free_port() -> int:
+    """A UDP port on 127.0.0.1 that is free now (for the bridge's connection_url)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    return port
+
+def _receive_frame(sock, parser, clock):
+    """One datagram from ``sock``: (arrival time on ``clock``, decoded message or None if undecodable); None on a
+    socket timeout."""
+    try:
+        data = sock.recv(65535)
+    except TimeoutError:
+        return None
+    arrival = clock()
+    try:
+        return arrival, parser.decode(bytearray(data))
+    except Exception:  # noqa: BLE001 - a bad frame is counted as no message
+        return arrival, None
+
 def percentile(values, q):
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(round(q / 100.0 * (len(ordered) - 1))))]
@@ -101,10 +124,7 @@ def bench_ros_latency(n=1000):
 
     from fpr_msgs.msg import AttitudeThrustSetpoint
 
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = _free_port()
     context = rclpy.Context()
     rclpy.init(context=context)
     node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=[
@@ -141,16 +161,11 @@ def bench_ros_latency(n=1000):
         got = None
         deadline = t_pub + 0.5
         while time.perf_counter() < deadline:
-            try:
-                data = sock.recv(65535)
-            except TimeoutError:
+            received = _receive_frame(sock, parser, time.perf_counter)
+            if received is None:
                 break
-            t_rx = time.perf_counter()
-            try:
-                m = parser.decode(bytearray(data))
-            except Exception:  # noqa: BLE001
-                continue
-            if m.get_type() == "SET_ATTITUDE_TARGET" and abs(m.thrust - expected) < 1e-6:
+            t_rx, m = received
+            if m is not None and m.get_type() == "SET_ATTITUDE_TARGET" and abs(m.thrust - expected) < 1e-6:
                 got = t_rx
                 break
         if got is None:
@@ -184,10 +199,7 @@ def bench_stream(seconds=20.0, phase=0.010, rate=50.0):
 
     from fpr_msgs.msg import AttitudeThrustSetpoint
 
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = _free_port()
     context = rclpy.Context()
     rclpy.init(context=context)
     node = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=[
@@ -225,15 +237,10 @@ def bench_stream(seconds=20.0, phase=0.010, rate=50.0):
             if now >= next_heartbeat:  # 10 Hz HEARTBEAT (the bridge's silence rule: any frame within 0.5 s)
                 sock.sendto(heartbeat, ("127.0.0.1", port))
                 next_heartbeat = now + 0.1
-            try:
-                data = sock.recv(65535)
-            except TimeoutError:
+            received = _receive_frame(sock, parser, time.monotonic)
+            if received is None:
                 continue
-            t_rx = time.monotonic()
-            try:
-                m = parser.decode(bytearray(data))
-            except Exception:  # noqa: BLE001
-                continue
+            t_rx, m = received
             if m is not None and m.get_type() == "SET_ATTITUDE_TARGET":
                 frames.append((t_rx, m.time_boot_ms, m.thrust))
 
