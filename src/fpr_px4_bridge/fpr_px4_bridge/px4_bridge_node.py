@@ -21,6 +21,7 @@ import rclpy
 from fpr_model.battery import thrust_coefficients
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -69,6 +70,9 @@ _PARAMETERS = {
                                "fpr_sim's emulator); auto: ros_time with use_sim_time, else estimate"),
     "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
+    "wall_silence_timeout": (0.8, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
+                                  "simulator) is reported lost even though /clock stopped with it; 0: off. Runs "
+                                  "with the receive thread (the deterministic runner owns the timing)"),
 }
 
 
@@ -149,6 +153,15 @@ class Px4BridgeNode(Node):
         if bool(p["receive_thread"]):
             self._rx_thread = threading.Thread(target=self._receive_loop, name="px4_bridge_rx", daemon=True)
             self._rx_thread.start()
+        # Under use_sim_time every timer above runs on /clock, which stops when the simulator dies: the bridge's
+        # own silence check (heartbeat_timeout) would never fire. A steady-clock watchdog watches the frames.
+        self.wall_silence_timeout = float(p["wall_silence_timeout"])
+        self._last_frame_wall = time.monotonic()
+        self._rx_frames_seen = 0
+        self._wall_silent_since: float | None = None
+        if bool(p["receive_thread"]) and self.wall_silence_timeout > 0.0 and \
+                bool(self.get_parameter("use_sim_time").value):
+            self.create_timer(0.1, self._on_wall_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         address = self.link.local_address or self.link.spec.device
         self.get_logger().info(
             f"px4_bridge uav {uav_id}: {url} (bound {address}), PX4 system {target_system}, "
@@ -206,6 +219,37 @@ class Px4BridgeNode(Node):
         msg.setpoint_rate = float(s.setpoint_rate)
         msg.rx_garbage = min(s.rx_garbage, 0xFFFFFFFF)
         msg.rejected_setpoints = min(s.rejected_setpoints, 0xFFFFFFFF)
+        self.status_pub.publish(msg)
+
+    def _on_wall_watchdog(self) -> None:
+        """Steady clock, 10 Hz (use_sim_time only): no MAVLink frame for ``wall_silence_timeout`` wall seconds ->
+        one warning and a status with ``connected`` false (the /clock-driven status timer may have stopped); one
+        line again when frames come back."""
+        now = time.monotonic()
+        with self._lock:
+            frames = self.link.counters.rx_frames
+        if frames != self._rx_frames_seen:
+            self._rx_frames_seen, self._last_frame_wall = frames, now
+            if self._wall_silent_since is not None:
+                self.get_logger().info(f"MAVLink frames again after {now - self._wall_silent_since:.1f} s of wall "
+                                       "time without any")
+                self._wall_silent_since = None
+            return
+        silence = now - self._last_frame_wall
+        if frames == 0 or silence < self.wall_silence_timeout:  # never heard (start-up): the link is simply down
+            return
+        if self._wall_silent_since is None:
+            self._wall_silent_since = self._last_frame_wall
+            self.get_logger().warning(
+                f"PX4 lost: no MAVLink frame for {silence:.1f} s of wall time (wall_silence_timeout "
+                f"{self.wall_silence_timeout:g} s) and simulation time at {self._now():.3f} s: the simulator (or PX4) "
+                "is dead or hung")
+        msg = UavStatus()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.uav_id = self.config.uav_id
+        msg.state = UavStatus.STATE_DISCONNECTED
+        msg.connected = False
+        msg.link_age = float(silence)
         self.status_pub.publish(msg)
 
     # ---- reception thread ------------------------------------------------------------------------------

@@ -316,3 +316,18 @@ def test_px4_boot_clock_auto_follows_use_sim_time(free_port, sim_time, setting, 
                 Parameter("px4_boot_clock", value="wall"), Parameter("connection_url", value=f"udp://127.0.0.1:{free_port}")])
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_a_dead_simulator_is_reported_by_the_wall_clock_watchdog(graph):
+    """The simulator dies: no MAVLink and no /clock any more, so every /clock-driven check stands still; the steady
+    watchdog reports the lost link (one warning, a status with connected false) within about 1 s of wall time."""
+    node, fake, sim, teleop_pub, statuses, imus = graph
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
+    assert node._wall_silent_since is None
+    frozen = time.monotonic()  # from now on nothing steps the simulation: no frame, no /clock
+    assert wait_for(lambda: statuses and not statuses[-1].connected, timeout=5.0)
+    reported = time.monotonic() - frozen
+    status = statuses[-1]
+    assert status.state == UavStatus.STATE_DISCONNECTED and status.link_age >= node.wall_silence_timeout
+    assert node._wall_silent_since is not None
+    assert reported < 3.0  # the watchdog's own bound is wall_silence_timeout + its 0.1 s period (generous: CI load)
