@@ -125,6 +125,8 @@ class GraphOptions:
     operator: str = "joy_script"            #: joy_script | pilot | joystick | none (an external /joy publisher)
     script: str = "takeoff_hover_land"      #: joy_script / pilot: a script name or path
     info_link: bool = False                 #: route /fpr/info through an info_link node (communication faults)
+    #: MAVLink 2 signing key file for every px4_bridge and (sim) every emulated PX4; "": unsigned
+    signing_key_file: str = ""
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
     uav_parameters: dict[tuple[str, int], dict[str, Any]] = field(default_factory=dict)
     params_files: dict[str, list[str]] = field(default_factory=dict)
@@ -178,14 +180,18 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
         scenario_n = load_scenario(scenario_file).n
         if scenario_n != n:
             raise ValueError(f"scenario '{options.scenario}' has n = {scenario_n}, the graph n = {n}")
-        specs.append(_spec(options, "simulator", "", "simulator", {
-            "scenario_file": scenario_file, "emulated_cameras": options.cameras == "emulated"}))
+        simulator = {"scenario_file": scenario_file, "emulated_cameras": options.cameras == "emulated"}
+        if options.signing_key_file:
+            simulator["signing_key_file"] = options.signing_key_file
+        specs.append(_spec(options, "simulator", "", "simulator", simulator))
     info_topic = "/fpr/info_link" if options.info_link else "/fpr/info"
     for i in range(1, n + 1):
         ns, group = uav_namespace(i), f"uav{i}"
         bridge = {"uav_id": i}
         if options.backend == "sim":  # the emulated PX4 boots at simulation time 0: exact setpoint stamps
             bridge["px4_boot_clock"] = "ros_time"
+        if options.signing_key_file:
+            bridge["signing_key_file"] = options.signing_key_file
         specs.append(_spec(options, "px4_bridge", ns, group, bridge, i))
         if options.cameras == "images":
             specs.append(_spec(options, "aruco_detector", ns, group, {}, i))
@@ -235,6 +241,8 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "scenario": ("ground_start", "sim: scenario name or path (fpr_experiments / fpr_sim config/scenarios)"),
     "operator": ("", "joy_script | joystick | none (default: joy_script in sim, joystick on the robot)"),
     "script": ("takeoff_hover_land", "joy_script: script name or path (config/joy_scripts)"),
+    "signing_key_file": ("", "MAVLink 2 signing key (64 hex digits) for every px4_bridge (and, sim, every emulated "
+                             "PX4); empty: unsigned"),
 }
 
 
@@ -253,6 +261,6 @@ def launch_options(values: Mapping[str, str]) -> GraphOptions:
     cameras = merged["cameras"] or ("emulated" if backend == "sim" else "images")
     operator = merged["operator"] or ("joy_script" if backend == "sim" else "joystick")
     options = GraphOptions(n=n, mode=merged["mode"], cameras=cameras, backend=backend, scenario=merged["scenario"],
-                           operator=operator, script=merged["script"])
+                           operator=operator, script=merged["script"], signing_key_file=merged["signing_key_file"])
     options.validate()
     return options

@@ -37,6 +37,8 @@ __all__ = [
     "ConnectionSpec",
     "LinkCounters",
     "MavlinkLink",
+    "advance_signing_timestamp",
+    "enable_signing",
     "load_signing_key",
     "parse_connection_url",
     "signing_timestamp",
@@ -109,6 +111,26 @@ def signing_timestamp(unix_time: float | None = None) -> int:
     """MAVLink signing timestamp (10 µs units since 2015-01-01) of ``unix_time`` (default: now)."""
     now = time.time() if unix_time is None else unix_time
     return max(0, int((now - _SIGNING_EPOCH) * 100_000))
+
+
+def enable_signing(mav, key: bytes, link_id: int, unix_time: float) -> None:
+    """Sign every outgoing frame of the pymavlink codec ``mav`` with ``key`` (32 bytes) and refuse every unsigned
+    incoming one (fpr_px4_bridge's link and fpr_sim's PX4 emulator: one implementation)."""
+    if len(key) != 32:
+        raise ValueError("MAVLink 2 signing key must be 32 bytes")
+    mav.signing.secret_key = bytes(key)
+    mav.signing.link_id = int(link_id) & 0xFF
+    mav.signing.timestamp = signing_timestamp(unix_time)
+    mav.signing.sign_outgoing = True
+    mav.signing.allow_unsigned_callback = None  # refuse every unsigned frame
+
+
+def advance_signing_timestamp(mav, unix_time: float) -> None:
+    """Before each signed frame: max(wall-clock timestamp, last + 1) (module doc). pymavlink signs with
+    ``signing.timestamp`` and then adds 1 (so it already holds last + 1), and raises it to any newer timestamp it
+    accepts from a peer."""
+    signing = mav.signing
+    signing.timestamp = max(signing_timestamp(unix_time), int(signing.timestamp))
 
 
 @dataclass
@@ -220,13 +242,7 @@ class MavlinkLink:
         self.mav = mavlink.MAVLink(_DatagramWriter(self), srcSystem=int(system_id), srcComponent=int(component_id))
         self.signing = signing_key is not None
         if signing_key is not None:
-            if len(signing_key) != 32:
-                raise ValueError("MAVLink 2 signing key must be 32 bytes")
-            self.mav.signing.secret_key = bytes(signing_key)
-            self.mav.signing.link_id = int(signing_link_id) & 0xFF
-            self.mav.signing.timestamp = signing_timestamp(wall_clock())
-            self.mav.signing.sign_outgoing = True
-            self.mav.signing.allow_unsigned_callback = None  # refuse every unsigned frame
+            enable_signing(self.mav, signing_key, signing_link_id, wall_clock())
         self._sock: socket.socket | None = None
         self._fd: int | None = None
         self._peer: tuple[str, int] | None = None
@@ -300,10 +316,7 @@ class MavlinkLink:
         return self.counters.tx_frames > before
 
     def _update_signing_timestamp(self) -> None:
-        """Next signed frame: max(wall-clock timestamp, last + 1). pymavlink signs with ``signing.timestamp`` and
-        then adds 1 (so it already holds last + 1), and raises it to any newer timestamp it accepts from a peer."""
-        signing = self.mav.signing
-        signing.timestamp = max(signing_timestamp(self.wall_clock()), int(signing.timestamp))
+        advance_signing_timestamp(self.mav, self.wall_clock())
 
     # ---- reception ---------------------------------------------------------------------------------------
     def receive(self, timeout: float = 0.0, max_datagrams: int = 256) -> list:

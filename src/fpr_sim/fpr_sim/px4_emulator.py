@@ -72,7 +72,11 @@ to its sender, with the sender's system/component as target):
   own clock there, not this PX4's: telling the time bases apart is the lockstep's business, simulation.py);
   :attr:`Px4Emulator.setpoint_latency` keeps the age of each new stamped setpoint on arrival;
 - malformed, unknown or unhandled MAVLink is ignored and counted (:attr:`Px4Emulator.counters`); a field the
-  emulator cannot use (NaN where a number is needed) is counted as garbage, never a crash.
+  emulator cannot use (NaN where a number is needed) is counted as garbage, never a crash;
+- MAVLink 2 signing (``signing_key``; the simulator's ``signing_key_file``, as PX4 with MAV_SIGN_CFG): every
+  outgoing frame signed, timestamps following the wall clock (fpr_px4_bridge.link's one implementation), every
+  unsigned or wrongly signed incoming frame refused and counted as garbage, so that the whole simulated graph can
+  run signed (tests/test_signed_graph.py).
 
 Modes (PX4 parameters emulated, :class:`~fpr_sim.scenario.Px4Config` field in brackets); PX4 boots in POSCTL:
 
@@ -133,12 +137,15 @@ from __future__ import annotations
 
 import math
 import socket
+import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from fpr_model.frames import enu_to_ned, flu_to_frd, quat_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
 from fpr_model.rotations import quat_multiply, quat_to_euler_zyx
+from fpr_px4_bridge.link import advance_signing_timestamp, enable_signing
 from fpr_px4_bridge.px4_protocol import (
     ATTITUDE_IGNORE,
     BODY_PITCH_RATE_IGNORE,
@@ -252,7 +259,7 @@ class EmulatorCounters:
     setpoints: int = 0  #: accepted offboard setpoints, attitude and position (new ones and repetitions)
     new_setpoints: int = 0  #: accepted with another time_boot_ms than the one before (not a repetition)
     rejected_setpoints: int = 0  #: NaN/inf, non-unit quaternion, NaN thrust, unsupported frame / type_mask
-    garbage: int = 0  #: malformed frames (bad CRC, bad length, unknown message id)
+    garbage: int = 0  #: malformed frames (bad CRC, bad length, unknown message id; unsigned ones when signing)
     ignored: int = 0  #: valid MAVLink we do not handle, or addressed to another system
     commands: int = 0
     failsafes: int = 0  #: offboard-loss and RC-loss failsafes
@@ -316,7 +323,11 @@ class Px4Emulator:
     :meth:`update` with the simulation time, and :meth:`due_messages` / :meth:`send_messages` every step."""
 
     def __init__(self, uav_id: int, config: Px4Config, yaw_offset: float, local_port: int | None = None,
-                 remote_port: int | None = None, host: str = "127.0.0.1") -> None:
+                 remote_port: int | None = None, host: str = "127.0.0.1", signing_key: bytes | None = None,
+                 wall_clock: Callable[[], float] = time.time) -> None:
+        """``signing_key`` (32 bytes): MAVLink 2 signing as PX4 with MAV_SIGN_CFG set — every outgoing frame signed
+        (timestamps on ``wall_clock``, UTC Unix seconds), every unsigned or wrongly signed frame refused and counted
+        as garbage; None: no signing (PX4's default)."""
         if host not in ("127.0.0.1", "localhost"):
             raise ValueError(f"MAVLink is loopback-only in this project (DESIGN.md §6), got host {host!r}")
         self.uav_id = int(uav_id)
@@ -326,6 +337,10 @@ class Px4Emulator:
         self._mavlink = mavlink
         self.mav = mavlink.MAVLink(None, srcSystem=self.uav_id, srcComponent=1)
         self.mav.robust_parsing = True
+        self.signing = signing_key is not None
+        self._wall_clock = wall_clock
+        if signing_key is not None:
+            enable_signing(self.mav, signing_key, link_id=0, unix_time=wall_clock())
         local_port = LOCAL_BASE_PORT + self.uav_id - 1 if local_port is None else int(local_port)
         remote_port = REMOTE_BASE_PORT + self.uav_id - 1 if remote_port is None else int(remote_port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -1071,6 +1086,8 @@ class Px4Emulator:
         target = address or self.peer
         if target is None:
             return
+        if self.signing:
+            advance_signing_timestamp(self.mav, self._wall_clock())
         try:
             self.sock.sendto(message.pack(self.mav), target)
         except OSError:

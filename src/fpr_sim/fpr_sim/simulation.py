@@ -87,6 +87,8 @@ class SimulationOptions:
     local_base_port: int = LOCAL_BASE_PORT  #: UAV i's emulator binds local_base_port + i − 1 (0: ephemeral, tests)
     remote_base_port: int = REMOTE_BASE_PORT  #: ... and sends to remote_base_port + i − 1 (0: only once contacted)
     remote_ports: tuple[int, ...] = ()  #: explicit remote port per UAV (tests); overrides remote_base_port
+    #: MAVLink 2 signing key (32 bytes) of every emulated PX4 (None: no signing, PX4's default)
+    signing_key: bytes | None = None
     #: [s] a setpoint stamp later than the simulation time by more than this is on a foreign clock (module doc)
     clock_tolerance: float = 0.005
     #: [s] ... and so is one older than this on arrival
@@ -118,7 +120,8 @@ class Simulation:
                              ((remote_base + i) if remote_base else 0) for i in range(n)]
         self.emulators = [Px4Emulator(i + 1, scenario.px4, self.sensors.yaw_offsets[i],
                                       local_port=(local_base + i) if local_base else 0,
-                                      remote_port=self.remote_ports[i]) for i in range(n)]
+                                      remote_port=self.remote_ports[i], signing_key=options.signing_key)
+                          for i in range(n)]
         self.ports = [e.port for e in self.emulators]
         self._steps_per_control = max(1, int(round(self.options.physics_rate / self.options.control_rate)))
         self._steps_per_px4 = max(1, int(round(self.options.physics_rate / scenario.px4.controller_rate)))

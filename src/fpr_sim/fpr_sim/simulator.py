@@ -16,6 +16,7 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
+from fpr_px4_bridge.link import load_signing_key
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -66,6 +67,9 @@ class SimulatorNode(Node):
             "UAV i's PX4 emulator sends HEARTBEAT/telemetry to 127.0.0.1:remote_base_port+i-1 (where px4_bridge "
             "listens), then replies to whoever talks to it; 0: silent until contacted"))
         p("emulated_cameras", False, descriptor=_desc("publish noisy marker poses instead of images"))
+        p("signing_key_file", "", descriptor=_desc(
+            "MAVLink 2 signing key of every emulated PX4 (64 hex digits or 32 bytes, as px4_bridge's): frames signed, "
+            "unsigned input refused; empty: no signing (PX4's default)"))
         p("duration", 0.0, descriptor=_desc("stop after this simulated time [s]; 0 = run until shutdown"))
         p("wait_for_clock_subscribers", 0, descriptor=_desc(
             "run(): before the first step, wait until /clock has this many subscriptions (every simulated-time node "
@@ -80,7 +84,9 @@ class SimulatorNode(Node):
                                     lockstep_timeout=float(get("lockstep_timeout").value),
                                     lockstep_on_timeout=str(get("lockstep_on_timeout").value),
                                     local_base_port=int(get("local_base_port").value),
-                                    remote_base_port=int(get("remote_base_port").value))
+                                    remote_base_port=int(get("remote_base_port").value),
+                                    signing_key=load_signing_key(str(get("signing_key_file").value))
+                                    if get("signing_key_file").value else None)
         self.sim = Simulation(self.scenario, options)
         self.sim.on_notice = self.get_logger().warning
         self.real_time_factor = max(0.0, float(get("real_time_factor").value))
