@@ -54,7 +54,7 @@ def limit_variances(P: np.ndarray, limit: np.ndarray) -> None:
     corrections grows P without bound (and (I₄ + Ω T_s) is not orthogonal, so the quaternion block grows
     geometrically); an uncertainty beyond the physical range of the state carries no information."""
     diagonal = np.diag(P)
-    if not (diagonal > limit).any():
+    if not (diagonal > limit).any() or not np.isfinite(diagonal).all():  # non-finite: for is_healthy() to report
         return
     scale = np.sqrt(np.minimum(1.0, limit / np.maximum(diagonal, np.finfo(float).tiny)))
     P *= scale[:, None]
