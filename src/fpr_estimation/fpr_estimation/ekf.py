@@ -13,6 +13,10 @@ prediction first (q and −q are one attitude); the quaternion is renormalised a
 
 Noise (from YAML): Q = diag(σ_p² T_s I₃, σ_q² T_s I₄) with random-walk densities; R = diag(σ_pm² I₃, σ_qm² I₄),
 σ_qm = ½·(angle σ) since a small rotation δθ changes the quaternion by ≈ δθ/2.
+
+Robustness (issue 12): the variances are capped at the state's physical range after each prediction
+(:func:`limit_variances`), and :meth:`RelativePoseEKF.is_healthy` checks state and covariance for NaN/inf after
+each step; the estimator resets a filter that fails it (:meth:`RelativePoseEKF.reset`).
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from fpr_model.rotations import quat_multiply, quat_normalize, quat_right_matrix, quat_to_rotvec
 
-__all__ = ["FilterNoise", "RelativePoseEKF", "quaternion_to_body_error_jacobian"]
+__all__ = ["FilterNoise", "RelativePoseEKF", "limit_variances", "quaternion_to_body_error_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,19 @@ class FilterNoise:
                 raise ValueError(f"{name}: must be positive and finite, got {value}")
 
 
+def limit_variances(P: np.ndarray, limit: np.ndarray) -> None:
+    """Cap the variances of P in place at ``limit`` by the congruence ``P ← D P D``, ``D = diag(min(1, √(limit /
+    P_kk)))``: P stays symmetric positive semi-definite and correlations are kept. The prediction (4.15) without
+    corrections grows P without bound (and (I₄ + Ω T_s) is not orthogonal, so the quaternion block grows
+    geometrically); an uncertainty beyond the physical range of the state carries no information."""
+    diagonal = np.diag(P)
+    if not (diagonal > limit).any() or not np.isfinite(diagonal).all():  # non-finite: for is_healthy() to report
+        return
+    scale = np.sqrt(np.minimum(1.0, limit / np.maximum(diagonal, np.finfo(float).tiny)))
+    P *= scale[:, None]
+    P *= scale[None, :]
+
+
 def quaternion_to_body_error_jacobian(q: np.ndarray) -> np.ndarray:
     """G (3×4) with ``δθ_body ≈ G δq`` at the unit quaternion q: ``δθ = 2·vec(q̄ ∘ δq)``, from (A.83)."""
     w, x, y, z = q
@@ -55,14 +72,25 @@ class RelativePoseEKF:
 
     name = "ekf"
 
-    def __init__(self, noise: FilterNoise | None = None) -> None:
+    def __init__(self, noise: FilterNoise | None = None, position_sigma_limit: float = 2.0) -> None:
+        """``position_sigma_limit`` [m]: cap of the 1-σ of each position axis (see :func:`limit_variances`)."""
         self.noise = noise if noise is not None else FilterNoise()
         n = self.noise
         self._R = np.diag([n.measurement_position_sigma ** 2] * 3 + [(0.5 * n.measurement_angle_sigma) ** 2] * 4)
         self._q_density = np.array([n.position_random_walk ** 2] * 3 + [(0.5 * n.attitude_random_walk) ** 2] * 4)
+        # Variance caps: position from the camera range, quaternion components (|q_k| <= 1) at 1.
+        self._variance_limit = np.array([float(position_sigma_limit) ** 2] * 3 + [1.0] * 4)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to "not initialised" (after a non-finite state): the next :meth:`initialize` starts again."""
         self.x = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
         self.P = np.eye(7)
         self.initialized = False
+
+    def is_healthy(self) -> bool:
+        """State and covariance finite, variances non-negative (checked after every predict and correct)."""
+        return bool(np.isfinite(self.x).all() and np.isfinite(self.P).all() and (np.diag(self.P) >= 0.0).all())
 
     # -- state access ------------------------------------------------------------------------------------
     @property
@@ -98,6 +126,7 @@ class RelativePoseEKF:
         P[3:, :] = transition @ P[3:, :]
         P[:, 3:] = P[:, 3:] @ transition.T
         P[np.diag_indices(7)] += self._q_density * dt
+        limit_variances(P, self._variance_limit)
 
     def innovation(self, position: np.ndarray, quaternion: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Returns (7-D innovation z − h(x') with the sign-aligned quaternion, 6-D minimal innovation

@@ -9,6 +9,8 @@ bias ``b``: ``ω_true = ω_meas − b``).
   ``F = [[I, 0, 0], [0, exp(−[(ω − b) T_s]×), −I T_s], [0, 0, I]]``, ``P' = F P Fᵀ + Q T_s``.
 - Correction with ``ν = [p_m − p, log(q^{-1} ∘ q_m)]`` and H = [I₆, 0]: ``K = P'Hᵀ(H P' Hᵀ + R)⁻¹``,
   ``δx = K ν``, ``p += δp``, ``q ← q ∘ exp(δθ/2)``, ``b += δb``, ``P = (I − K H) P'``.
+- Robustness (issue 12): variances capped after each prediction (:func:`~fpr_estimation.ekf.limit_variances`),
+  :meth:`RelativePoseMEKF.is_healthy` after each step, :meth:`RelativePoseMEKF.reset` on failure.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from fpr_model.rotations import quat_from_rotvec, quat_multiply, quat_normalize, quat_to_rotmat, quat_to_rotvec
 
-from fpr_estimation.ekf import FilterNoise
+from fpr_estimation.ekf import FilterNoise, limit_variances
 
 __all__ = ["RelativePoseMEKF"]
 
@@ -26,7 +28,10 @@ class RelativePoseMEKF:
 
     name = "mekf"
 
-    def __init__(self, noise: FilterNoise | None = None, estimate_gyro_bias: bool = True) -> None:
+    def __init__(self, noise: FilterNoise | None = None, estimate_gyro_bias: bool = True,
+                 position_sigma_limit: float = 2.0) -> None:
+        """``position_sigma_limit`` [m]: cap of the 1-σ of each position axis (see
+        :func:`~fpr_estimation.ekf.limit_variances`)."""
         self.noise = noise if noise is not None else FilterNoise()
         self.estimate_gyro_bias = bool(estimate_gyro_bias)
         n = self.noise
@@ -36,11 +41,23 @@ class RelativePoseMEKF:
         if self.estimate_gyro_bias:
             density += [n.gyro_bias_random_walk ** 2] * 3
         self._q_density = np.array(density)
+        # Variance caps: position from the camera range, attitude error at π², gyro bias at (1 rad/s)².
+        self._variance_limit = np.array([float(position_sigma_limit) ** 2] * 3 + [np.pi ** 2] * 3
+                                        + [1.0] * (self.dim - 6))
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to "not initialised" (after a non-finite state): the next :meth:`initialize` starts again."""
         self.p = np.zeros(3)
         self.q = np.array([1.0, 0.0, 0.0, 0.0])
         self.gyro_bias = np.zeros(3)
         self.P = np.eye(self.dim)
         self.initialized = False
+
+    def is_healthy(self) -> bool:
+        """State and covariance finite, variances non-negative (checked after every predict and correct)."""
+        return bool(np.isfinite(self.p).all() and np.isfinite(self.q).all() and np.isfinite(self.gyro_bias).all()
+                    and np.isfinite(self.P).all() and (np.diag(self.P) >= 0.0).all())
 
     @property
     def position(self) -> np.ndarray:
@@ -77,6 +94,7 @@ class RelativePoseMEKF:
             P[3:6, :] -= dt * P[6:9, :]
             P[:, 3:6] -= dt * P[:, 6:9]
         P[np.diag_indices(self.dim)] += self._q_density * dt
+        limit_variances(P, self._variance_limit)
 
     def innovation(self, position: np.ndarray, quaternion: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Returns (the 6-D innovation used by :meth:`correct`, the same for the gate, its covariance S)."""

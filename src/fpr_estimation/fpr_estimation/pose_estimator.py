@@ -5,9 +5,12 @@ Run in the UAV's namespace: ``ros2 run fpr_estimation pose_estimator --ros-args 
 --params-file share/fpr_estimation/config/pose_estimator.yaml``.
 Subscribes ``marker`` (fpr_msgs/MarkerDetection), ``imu`` (sensor_msgs/Imu: FLU body attitude in the UAV's local
 ENU frame, FLU rate) and ``velocity_body`` (geometry_msgs/TwistStamped, FLU); publishes ``local_state``
-(fpr_msgs/LocalState) at ``output_rate`` (50 Hz) from the node clock (use_sim_time honoured), once the first
-detection has been accepted. The filter predicts on every IMU message (dt from the IMU header stamps, or the
-receive time when a stamp is zero) and corrects on every detection that passes the innovation gate.
+(fpr_msgs/LocalState) at ``output_rate`` (50 Hz) from the node clock (use_sim_time honoured), once the filter
+is initialised (K consistent detections; nothing is published before, nor after a reset: the controller's
+``local_state_timeout`` applies). The filter predicts on every accepted IMU message (dt from the IMU header stamps,
+or the receive time when a stamp is zero) and corrects on every detection that passes the innovation gate.
+Every input is checked by the core first (issue 12: rates, specific force, quaternions, stamps, marker distance);
+each refusal, fallback and return is one log line, at most one per kind per ``log_interval``.
 """
 
 from __future__ import annotations
@@ -16,7 +19,6 @@ import math
 
 import numpy as np
 from fpr_model.calibration import CameraModel, EulerZxzPose, VisionCalibration
-from fpr_model.rotations import quat_to_rotmat
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -24,8 +26,8 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 
 from fpr_estimation.ekf import FilterNoise
-from fpr_estimation.estimator import EstimatorConfig, PoseEstimatorCore
-from fpr_estimation.gating import GateConfig
+from fpr_estimation.estimator import EstimatorConfig, LogLimiter, PoseEstimatorCore
+from fpr_estimation.gating import STANDARD_GRAVITY, GateConfig, InputBounds, ReinitConfig
 from fpr_estimation.node_utils import spin_node
 from fpr_msgs.msg import LocalState, MarkerDetection
 
@@ -45,9 +47,22 @@ _PARAMETERS = {
     "gate_max_position_error": (0.10, "[m] threshold gate on the position innovation"),
     "gate_max_angle_error": (math.radians(10.0), "[rad] threshold gate on the attitude innovation"),
     "gate_mahalanobis_threshold": (22.46, "chi-square(6) threshold of the Mahalanobis gate"),
-    "max_consecutive_rejections": (10, "re-initialise from the detection after this many rejections in a row"),
     "stale_timeout": (0.5, "[s] no accepted detection for this long: valid = false (prediction continues)"),
-    "max_prediction_step": (0.1, "[s] IMU gaps longer than this are not integrated"),
+    "max_prediction_step": (0.1, "[s] IMU gaps longer than this are not integrated (reported)"),
+    # Input guards (issue 12): refused inputs never reach the filter.
+    "max_body_rate": (35.0, "[rad/s] IMU samples with a larger |rate| are refused (PX4 gyro range, 2000 deg/s)"),
+    "max_specific_force": (16.0 * STANDARD_GRAVITY,
+                           "[m/s^2] IMU samples with a larger |specific force| are refused (16 g accelerometer range)"),
+    "max_quaternion_norm_error": (0.01, "IMU / detection quaternions with | |q| - 1 | above this are refused"),
+    "max_stamp_future": (0.2, "[s] IMU samples / detections stamped later than now + this are refused"),
+    "max_marker_distance": (2.0, "[m] detections farther from the camera are refused (also caps the position sigma)"),
+    # (Re-)initialisation only on consistent detections (issue 12).
+    "reinit_consistent_detections": (4, "K: (re-)initialise only from K consecutive mutually consistent detections"),
+    "reinit_window": (0.3, "[s] the K consistent detections span at most this"),
+    "reinit_position_tolerance": (0.10, "[m] pairwise position agreement of the K detections"),
+    "reinit_angle_tolerance": (math.radians(10.0), "[rad] pairwise attitude agreement (after the IMU rotation)"),
+    "reinit_min_lost_time": (1.5, "[s] an initialised filter is re-initialised only after this long without an "
+                                  "accepted detection (shorter bursts are gated)"),
     "output_rate": (50.0, "[Hz] local_state publication rate"),
     "euler_order": ("extrinsic", "how to read the ZXZ angles of Table D.1 (see fpr_model.calibration)"),
     "camera_translation_cm": ([8.45, -9.35, 0.79], "[cm] camera position in the body frame, b_T_C (Table D.1)"),
@@ -83,14 +98,19 @@ class PoseEstimatorNode(Node):
                               float(p["measurement_position_sigma"]), float(p["measurement_angle_sigma"])),
             gate=GateConfig(str(p["gate_mode"]), float(p["gate_max_position_error"]),
                             float(p["gate_max_angle_error"]), float(p["gate_mahalanobis_threshold"])),
+            bounds=InputBounds(float(p["max_body_rate"]), float(p["max_specific_force"]),
+                               float(p["max_quaternion_norm_error"]), float(p["max_stamp_future"]),
+                               float(p["max_marker_distance"])),
+            reinit=ReinitConfig(int(p["reinit_consistent_detections"]), float(p["reinit_window"]),
+                                float(p["reinit_position_tolerance"]), float(p["reinit_angle_tolerance"]),
+                                float(p["reinit_min_lost_time"])),
             stale_timeout=float(p["stale_timeout"]),
-            max_consecutive_rejections=int(p["max_consecutive_rejections"]),
             max_prediction_step=float(p["max_prediction_step"]))
         self.core = PoseEstimatorCore(config, calibration)
         self._frame_id = str(p["frame_id"]) or f"uav{config.uav_id}/platform"
         self._uav_id = config.uav_id
         self._log_interval = float(p["log_interval"])
-        self._was_valid = False
+        self._limiter = LogLimiter(self._log_interval)
         self.published = 0
         self._pub = self.create_publisher(LocalState, "local_state", 10)
         self.create_subscription(MarkerDetection, "marker", self._on_marker, qos_profile_sensor_data)
@@ -104,49 +124,46 @@ class PoseEstimatorNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def _log_events(self) -> None:
+        """One line per core event (refusal, fallback, return), at most one per kind per log_interval."""
+        now = self._now()
+        logger = self.get_logger()
+        for event in self.core.take_events():
+            line = self._limiter(event, now)
+            if line is None:
+                continue
+            if event.level == "error":  # one call site per severity (rclpy requires it)
+                logger.error(line)
+            elif event.level == "warning":
+                logger.warning(line)
+            else:
+                logger.info(line)
+
     def _on_imu(self, msg: Imu) -> None:
-        stamp = _stamp_seconds(msg.header.stamp) or self._now()
-        o, w = msg.orientation, msg.angular_velocity
-        problem = self.core.on_imu(stamp, np.array([o.w, o.x, o.y, o.z]), np.array([w.x, w.y, w.z]))
-        if problem:
-            self.get_logger().warning(problem, throttle_duration_sec=self._log_interval)
+        now = self._now()
+        stamp = _stamp_seconds(msg.header.stamp) or now
+        o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        force = None if msg.linear_acceleration_covariance[0] == -1.0 else np.array([a.x, a.y, a.z])  # REP-145
+        self.core.on_imu(stamp, np.array([o.w, o.x, o.y, o.z]), np.array([w.x, w.y, w.z]), force, now)
+        self._log_events()
 
     def _on_velocity(self, msg: TwistStamped) -> None:
         v = msg.twist.linear
-        problem = self.core.on_velocity(np.array([v.x, v.y, v.z]))
-        if problem:
-            self.get_logger().warning(problem, throttle_duration_sec=self._log_interval)
+        self.core.on_velocity(np.array([v.x, v.y, v.z]))
+        self._log_events()
 
     def _on_marker(self, msg: MarkerDetection) -> None:
         q, t = msg.pose.orientation, msg.pose.position
-        quat = np.array([q.w, q.x, q.y, q.z])
-        norm = float(np.linalg.norm(quat)) if np.isfinite(quat).all() else float("nan")
-        if not 0.5 < norm < 1.5:
-            self.get_logger().warning(f"detection with an invalid quaternion (norm {norm}) ignored",
-                                      throttle_duration_sec=self._log_interval)
-            return
-        T = np.eye(4)
-        T[:3, :3] = quat_to_rotmat(quat / norm)
-        T[:3, 3] = [t.x, t.y, t.z]
-        result = self.core.on_detection(self._now(), T)
-        if isinstance(result, str):
-            self.get_logger().warning(result, throttle_duration_sec=self._log_interval)
-        elif not result.accepted:
-            self.get_logger().warning(f"detection rejected by the gate: {100 * result.position_error:.1f} cm, "
-                                      f"{math.degrees(result.angle_error):.1f} deg "
-                                      f"(total rejected {self.core.rejected_detections})",
-                                      throttle_duration_sec=self._log_interval)
+        capture = _stamp_seconds(msg.header.stamp) or None
+        self.core.on_marker(self._now(), np.array([t.x, t.y, t.z]), np.array([q.w, q.x, q.y, q.z]), capture)
+        self._log_events()
 
     def _on_timer(self) -> None:
         now_msg = self.get_clock().now()
         out = self.core.output(now_msg.nanoseconds * 1e-9)
+        self._log_events()
         if out is None:
-            self.get_logger().warning("no marker detection accepted yet: local_state not published",
-                                      throttle_duration_sec=self._log_interval)
             return
-        if self._was_valid and not out.valid:
-            self.get_logger().warning(f"estimate stale: no accepted detection for {out.detection_age:.2f} s")
-        self._was_valid = out.valid
         msg = LocalState()
         msg.header.stamp = now_msg.to_msg()
         msg.header.frame_id = self._frame_id

@@ -68,6 +68,13 @@ def _raw_rmse(sequence, skip=2.0):
     return np.sqrt(np.mean(position_errors ** 2, axis=0)), np.sqrt(np.mean(angle_errors ** 2, axis=0))
 
 
+def _initialise(core, stamp, pose):
+    """The K consistent detections a filter needs to initialise (issue 12), all at ``stamp``."""
+    for _ in range(core.config.reinit.consistent_detections):
+        decision = core.on_relative_pose(stamp, pose)
+    assert decision.accepted and decision.initialised and core.filter.initialized
+
+
 @pytest.fixture(scope="module")
 def runs():
     results = {}
@@ -118,7 +125,7 @@ def test_stale_after_half_a_second_prediction_continues_then_recovers():
     pose = make_transform(np.eye(3), [0.5, 0.0, -0.9])
     rate = np.array([0.0, 0.0, 0.5])
     core.on_imu(0.0, np.array([1.0, 0, 0, 0]), rate)
-    core.on_relative_pose(0.0, pose)
+    _initialise(core, 0.0, pose)
     t = 0.0
     for _ in range(120):  # 0.6 s of IMU only
         t += 0.005
@@ -135,13 +142,18 @@ def test_stale_after_half_a_second_prediction_continues_then_recovers():
     assert core.output(t).valid
 
 
-def test_reinitialises_after_consecutive_rejections():
-    core = PoseEstimatorCore(EstimatorConfig(max_consecutive_rejections=5))
-    core.on_relative_pose(0.0, make_transform(np.eye(3), [0.5, 0.0, -0.9]))
+def test_reinitialises_only_after_the_minimum_lost_time_on_consistent_detections():
+    """Issue 12: rejected detections re-initialise only once none was accepted for reinit.min_lost_time (1.5 s),
+    from K consistent ones (the old rule re-initialised on whatever came after ten rejections)."""
+    core = PoseEstimatorCore(EstimatorConfig())
+    _initialise(core, 0.0, make_transform(np.eye(3), [0.5, 0.0, -0.9]))
     moved = make_transform(np.eye(3), [0.8, 0.0, -0.9])
-    decisions = [core.on_relative_pose(0.05 * k, moved).accepted for k in range(1, 8)]
-    assert decisions == [False] * 5 + [True, True]
-    assert core.rejected_detections == 5
+    decisions = [core.on_relative_pose(0.05 * k, moved) for k in range(1, 41)]  # 2 s at 20 Hz
+    accepted = [d.accepted for d in decisions]
+    first = accepted.index(True)
+    assert 0.05 * (first + 1) >= 1.5 and not any(accepted[:first]) and all(accepted[first:])
+    assert decisions[first].initialised and not any(d.initialised for d in decisions[first + 1:])
+    assert core.rejected_detections == first
     assert np.allclose(core.filter.position, [0.8, 0.0, -0.9], atol=1e-3)
 
 
@@ -165,7 +177,7 @@ def test_bad_inputs_are_refused_without_crashing():
     behind[2, 3] = -1.0
     assert isinstance(core.on_detection(0.0, behind), str)
     assert core.output(0.0) is None
-    core.on_relative_pose(0.0, make_transform(np.eye(3), [0.5, 0.0, -0.9]))
+    _initialise(core, 0.0, make_transform(np.eye(3), [0.5, 0.0, -0.9]))
     core.on_imu(0.0, np.array([1.0, 0, 0, 0]), np.zeros(3))
     assert "back" in core.on_imu(-0.1, np.array([1.0, 0, 0, 0]), np.zeros(3))
     assert "gap" in core.on_imu(1.0, np.array([1.0, 0, 0, 0]), np.zeros(3))

@@ -152,13 +152,14 @@ def test_pose_estimator_node_with_sim_time(graph, scene):
     def stamp(t):
         return TimeMsg(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
 
-    def step_to(t, detect=True, nan_imu=False):
+    def step_to(t, detect=True, nan_imu=False, rate=0.0):
         clock_pub.publish(Clock(clock=stamp(t)))
         assert wait_for(lambda: node.get_clock().now().nanoseconds >= int(round(t * 1e9)), timeout=2.0)
         imu = Imu()
         imu.header.stamp = stamp(t)
         imu.orientation.w, imu.orientation.x, imu.orientation.y, imu.orientation.z = (
             (math.nan,) * 4 if nan_imu else imu_quat)
+        imu.angular_velocity.z = rate
         imu_pub.publish(imu)
         velocity_pub.publish(velocity)
         if detect and round(t / 0.005) % 10 == 0:  # 20 Hz
@@ -181,6 +182,14 @@ def test_pose_estimator_node_with_sim_time(graph, scene):
     assert last.relative_pose.position.x == pytest.approx(platform_T_body[0, 3], abs=1e-3)
     assert last.relative_yaw == pytest.approx(rotmat_to_euler_zyx(platform_T_body[:3, :3])[2], abs=1e-3)
     assert last.detection_age < 0.06 and last.rejected_detections == 0
+    # Issue 12's fault: IMU rates of 1e9 rad/s are refused; the estimate stays valid, finite and unmoved.
+    for _ in range(40):
+        t += 0.005
+        step_to(t, rate=1e9)
+    assert wait_for(lambda: states[-1].header.stamp.sec + 1e-9 * states[-1].header.stamp.nanosec >= t - 0.021)
+    assert wait_for(lambda: node.core.refused.get("imu_rate", 0) >= 40) and node.core.refused["imu_rate"] == 40
+    assert states[-1].valid and np.isfinite(states[-1].pose_stddev).all()
+    assert states[-1].relative_yaw == pytest.approx(rotmat_to_euler_zyx(platform_T_body[:3, :3])[2], abs=1e-3)
     # Detections stop and the IMU sends NaN: no crash, finite output, stale after 0.5 s.
     for _ in range(120):
         t += 0.005
