@@ -26,7 +26,7 @@ config/mappings/teleop_tilt30.yaml), with headroom for the teleop's low-pass der
 - |ψ̇^d| ≤ 1 rad/s: teleop 0.5;
 - |ϕ̇^d|, |ϑ̇^d|, |θ̇^d| ≤ 1 rad/s: the teleop's rate channels move at 5-10°/s, and a leg target clipped into
   the feasible range steps by at most ~20° over τ = 0.3 s;
-- |Fp v̇^d| ≤ 5 m/s²: a full stick reversal on all three axes, (1, 1, 0.6) m/s / 0.3 s, gives a norm of 5.0;
+- |Fp v̇^d| ≤ 6 m/s²: a full stick reversal on all three axes, (1, 1, 0.6) m/s / 0.3 s, gives a norm of 5.1;
 - |ψ̈^d| ≤ 5 rad/s²;
 - f^d_c in [0, 15] N (teleop 0-10 N). It is clamped inside [−15, 30] N and refused outside.
 
@@ -59,7 +59,7 @@ class CommandLimits:
     max_yaw_rate: float = 1.0  #: |ψ̇^d| [rad/s]
     max_tilt_rate: float = 1.0  #: |ϕ̇^d|, |ϑ̇^d| [rad/s]
     max_leg_rate: float = 1.0  #: |θ̇^d_i| [rad/s]
-    max_acceleration: float = 5.0  #: |Fp v̇^d_p| [m/s²]
+    max_acceleration: float = 6.0  #: |Fp v̇^d_p| [m/s²]
     max_yaw_acceleration: float = 5.0  #: |ψ̈^d| [rad/s²]
     max_contact_force: float = 15.0  #: f^d_c in [0, this] [N]
     refuse_ratio: float = 2.0  #: beyond this times a symmetric limit the command is refused (clamped below)
