@@ -190,7 +190,7 @@ class ControllerNode(Node):
             return
         self._local, self._local_time = local, self._now()
 
-    def _on_info(self, msg: InformationVector, msg_info: dict | None = None) -> None:
+    def _on_info(self, msg: InformationVector, msg_info: dict) -> None:
         """``msg_info``: rclpy's MessageInfo (a dict; Jazzy has no publisher GID, the publication sequence number
         tells the publishers apart, fpr_control.information). Invalid vectors (the sender's estimate is stale)
         count as missing, silently."""
@@ -198,8 +198,11 @@ class ControllerNode(Node):
         info = PeerInfo(int(msg.uav_id), msg.leg_angle, _vec(msg.velocity), _quat_wxyz(msg.attitude), msg.thrust)
         reason = self.controller.receive_info(info, self._now(), int(sequence) if sequence else None,
                                               bool(msg.valid))
-        for line in self.controller.information.take_announcements():
+        table = self.controller.information
+        for line in table.take_announcements():  # once per intruder stream / takeover
             self.get_logger().warning(f"/fpr/info: {line}")
+        for line in table.take_returns():
+            self.get_logger().info(f"/fpr/info: {line}", throttle_duration_sec=LOG_THROTTLE_S)
         if reason is not None:
             self.get_logger().warning(f"/fpr/info rejected: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 

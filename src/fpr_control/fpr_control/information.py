@@ -162,10 +162,16 @@ class InformationTable:
         self._intruders: dict[int, list[_Stream]] = {}
         self.intruder_messages = 0  #: ζ refused as another publisher's
         self._announcements: list[str] = []
+        self._returns: list[str] = []
 
     def take_announcements(self) -> list[str]:
-        """One-off lines to log once each: a new intruder, a publisher takeover, ζ_j accepted again."""
+        """One-off lines to log once each: a new intruder stream, a publisher takeover."""
         out, self._announcements = self._announcements, []
+        return out
+
+    def take_returns(self) -> list[str]:
+        """"ζ_j accepted again after N refused" lines (the node rate-limits them like the refusals)."""
+        out, self._returns = self._returns, []
         return out
 
     def note_own_publication(self) -> None:
@@ -264,7 +270,7 @@ class InformationTable:
             return f"zeta_{info.uav_id} {problem}: counted as missing"
         refused = self._refused.pop(info.uav_id, 0)
         if refused:
-            self._announcements.append(f"zeta_{info.uav_id} accepted again after {refused} refused")
+            self._returns.append(f"zeta_{info.uav_id} accepted again after {refused} refused")
         self._accepted[info.uav_id] = (info, receive_time)
         if info.uav_id == self.own_id:
             self._own_echo_time = receive_time  # our own vector, echoed by the shared topic

@@ -125,7 +125,7 @@ def test_implausible_zeta_is_refused_and_counts_as_missing_then_accepted_again()
     assert not table.all_fresh(0.25)  # ζ_2 is 0.25 s old: the NC fallback applies
     assert table.take_announcements() == []
     assert table.update(_zeta(2, leg=61.0), 0.26) is None  # a physical change: accepted, announced once
-    assert table.take_announcements() == ["zeta_2 accepted again after 7 refused"]
+    assert table.take_returns() == ["zeta_2 accepted again after 7 refused"] and table.take_announcements() == []
     # the jump bound grows with the time since the last accepted ζ: a lasting genuine change is taken
     assert table.update(_zeta(2, leg=90.0), 0.28) is not None  # 29 deg > 20 rad/s * 0.02 s + 5 deg
     assert table.update(_zeta(2, leg=90.0), 0.30) is None  # 29 deg < 20 rad/s * 0.04 s + 5 deg
