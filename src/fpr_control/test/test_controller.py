@@ -24,7 +24,7 @@ def _controllers(mode: str, state_source: str = "local", n: int = 3, **kwargs) -
     params = default_parameters(n)
     return [Controller(params, ControllerConfig(
         uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode=mode, gains=gains_from_dict({}, n),
-                                                state_source=state_source, **kwargs)) for i in range(n)]
+        state_source=state_source, **kwargs)) for i in range(n)]
 
 
 def _check_setpoints(outputs, max_thrust: float = 25.0) -> None:

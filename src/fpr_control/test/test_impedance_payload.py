@@ -33,7 +33,7 @@ ATTACH, RELEASE, END = 1.0, 6.0, 10.0  # [s]
 def _controllers(**kwargs) -> list[Controller]:
     return [Controller(PARAMS, ControllerConfig(
         uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode="impedance", gains=gains_from_dict({}, 3),
-                                                state_source="local", **kwargs)) for i in range(3)]
+        state_source="local", **kwargs)) for i in range(3)]
 
 
 class _Payload:

@@ -47,7 +47,7 @@ def _fly_and_observe(observers: dict, duration: float, noise=None, seed=0):
     rng = np.random.default_rng(seed)
     controllers = [Controller(PARAMS, ControllerConfig(
         uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode="pd", gains=gains_from_dict({}, 3),
-                                                       state_source="ground_truth")) for i in range(3)]
+        state_source="ground_truth")) for i in range(3)]
     q, nu = hover_state(PARAMS)
     sim = Sim(PARAMS, controllers, q, nu, np.zeros(3), external=lambda q, nu: PAYLOAD_FORCE)
     cmd = command(3)
