@@ -37,6 +37,7 @@ from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
 
 from fpr_control.information import (
+    InfoPlausibility,
     InformationTable,
     LocalEstimate,
     PeerInfo,
@@ -146,6 +147,8 @@ class ControllerConfig:
     max_tilt: float = math.radians(35.0)  # [rad] from the vertical of the controller frame
     require_own_echo: bool = True  # the own ζ_i must come back on the shared topic (else fallback)
     impedance_force_input: str = "interaction"  # one of IMPEDANCE_FORCE_INPUTS (decentralized impedance only)
+    info_plausibility: InfoPlausibility = field(default_factory=InfoPlausibility)  # ζ_j checks (issue 12)
+    own_writer_direct: bool = False  # the own ζ_i is read back from the topic it is written on (no relay)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -233,7 +236,8 @@ class Controller:
         self.config = config
         n = params.n
         self.n = n
-        self.information = InformationTable(n, config.uav_id, config.info_timeout, config.require_own_echo)
+        self.information = InformationTable(n, config.uav_id, config.info_timeout, config.require_own_echo,
+                                            config.info_plausibility, config.own_writer_direct)
         self.observer = make_observer(config.observer, config.gains.observer, n)
         use_truth = config.mode == "centralized" or config.state_source == "ground_truth"
         self.uses_ground_truth = use_truth
@@ -252,9 +256,10 @@ class Controller:
         self._observer_paused = False
 
     # ------------------------------------------------------------------------------------------------
-    def receive_info(self, info: PeerInfo, now: float) -> str | None:
-        """Store a peer's ζ_j (returns a rejection reason or None)."""
-        return self.information.update(info, now)
+    def receive_info(self, info: PeerInfo, now: float, sequence: int | None = None, valid: bool = True) -> str | None:
+        """Store a peer's ζ_j with its publisher's sequence number (returns a rejection reason or None; see
+        :meth:`fpr_control.information.InformationTable.update`)."""
+        return self.information.update(info, now, sequence, valid)
 
     def _active_mode(self, now: float) -> tuple[str, bool]:
         mode = self.config.mode

@@ -16,6 +16,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 
+from fpr_control.command_limits import CommandLimits, bound_command
 from fpr_control.controller import (
     DEFAULT_GAINS,
     MODE_CODES,
@@ -24,7 +25,7 @@ from fpr_control.controller import (
     GroundTruth,
     gains_from_dict,
 )
-from fpr_control.information import LocalEstimate, PeerInfo
+from fpr_control.information import InfoPlausibility, LocalEstimate, PeerInfo
 from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
 from fpr_control.reference import TeleopReference
 from fpr_msgs.msg import (
@@ -73,6 +74,59 @@ class ControllerNode(Node):
         info_input_topic = d("info_input_topic", "/fpr/info", describe(
             "topic the peers' zeta_j are read from (the own zeta_i is always published on /fpr/info); set it to "
             "a relay's output to inject communication faults (fpr_experiments info_link)")).value
+        # bounded inputs (issue 12): the controller's own limits on /fpr/teleop (fpr_control.command_limits)
+        lim = CommandLimits()
+        self.command_limits = CommandLimits(
+            leg_angle_min=math.radians(d("command_leg_angle_min_deg", math.degrees(lim.leg_angle_min), describe(
+                "[deg] commanded leg angles below are clamped to it (default: the teleop's 15 deg)")).value),
+            leg_angle_max=math.radians(d("command_leg_angle_max_deg", math.degrees(lim.leg_angle_max), describe(
+                "[deg] commanded leg angles above are clamped to it (default: the teleop's 80 deg)")).value),
+            leg_stop_min=math.radians(d("command_leg_stop_min_deg", math.degrees(lim.leg_stop_min), describe(
+                "[deg] joint stop: a command with a leg angle below is refused, in [0, leg_angle_min]")).value),
+            leg_stop_max=math.radians(d("command_leg_stop_max_deg", math.degrees(lim.leg_stop_max), describe(
+                "[deg] joint stop: a command with a leg angle above is refused, in [leg_angle_max, 180]")).value),
+            max_tilt=math.radians(d("command_max_tilt_deg", math.degrees(lim.max_tilt), describe(
+                "[deg] |roll|, |pitch| limit of the command, in (0, 90); default 30 (teleop_tilt30)")).value),
+            max_speed=d("command_max_speed", lim.max_speed, describe(
+                "[m/s] |platform velocity| limit (F_Fp), > 0")).value,
+            max_yaw_rate=d("command_max_yaw_rate", lim.max_yaw_rate, describe("[rad/s] |yaw rate| limit")).value,
+            max_tilt_rate=d("command_max_tilt_rate", lim.max_tilt_rate, describe(
+                "[rad/s] |roll rate|, |pitch rate| limit")).value,
+            max_leg_rate=d("command_max_leg_rate", lim.max_leg_rate, describe("[rad/s] |leg rate| limit")).value,
+            max_acceleration=d("command_max_acceleration", lim.max_acceleration, describe(
+                "[m/s^2] |platform acceleration| limit (F_Fp)")).value,
+            max_yaw_acceleration=d("command_max_yaw_acceleration", lim.max_yaw_acceleration, describe(
+                "[rad/s^2] |yaw acceleration| limit")).value,
+            max_contact_force=d("command_max_contact_force", lim.max_contact_force, describe(
+                "[N] contact force limit: [0, this] passes, [-this, refuse_ratio x this] is clamped")).value,
+            refuse_ratio=d("command_refuse_ratio", lim.refuse_ratio, describe(
+                "in [1, 10]: a value beyond this x its symmetric limit refuses the whole command (the last valid "
+                "one is kept); between the limit and this x the limit it is clamped")).value)
+        self._teleop_refused = 0  #: consecutive refused TeleopCommands (announced on return)
+        # zeta_j plausibility and one publisher per uav_id (issue 12; fpr_control.information)
+        ip = InfoPlausibility()
+
+        def info_bound(name: str, default: float, text: str) -> float:
+            return float(d(name, float(default), describe(text)).value)
+
+        plausibility = InfoPlausibility(
+            leg_angle_min=math.radians(info_bound("info_leg_angle_min_deg", math.degrees(ip.leg_angle_min),
+                                                  "[deg] a zeta_j with a leg angle below is refused (joint stop "
+                                                  "10 deg - 3 deg), >= 0")),
+            leg_angle_max=math.radians(info_bound("info_leg_angle_max_deg", math.degrees(ip.leg_angle_max),
+                                                  "[deg] a zeta_j with a leg angle above is refused (the model's "
+                                                  "domain (0, 90])")),
+            max_speed=info_bound("info_max_speed", ip.max_speed, "[m/s] a zeta_j with |Fp v_j| above is refused"),
+            max_thrust=info_bound("info_max_thrust", ip.max_thrust, "[N] a zeta_j with a thrust above is refused"),
+            max_leg_rate=info_bound("info_max_leg_rate", ip.max_leg_rate, "[rad/s] refuse a zeta_j whose leg angle "
+                                    "jumps more than this x dt + 5 deg from the last accepted one"),
+            max_angular_rate=info_bound("info_max_angular_rate", ip.max_angular_rate, "[rad/s] refuse a zeta_j "
+                                        "whose attitude turns more than this x dt + 10 deg from the last accepted"),
+            max_acceleration=info_bound("info_max_acceleration", ip.max_acceleration, "[m/s^2] refuse a zeta_j "
+                                        "whose velocity jumps more than this x dt + 1 m/s from the last accepted"),
+            publisher_timeout=info_bound("info_publisher_timeout", ip.publisher_timeout, "[s] a uav_id's "
+                                         "established zeta publisher silent this long may be replaced (> 0)"))
+        own_writer_direct = info_input_topic == "/fpr/info"
         gains = {}
         for group, values in DEFAULT_GAINS.items():
             gains[group] = {}
@@ -86,7 +140,8 @@ class ControllerNode(Node):
         self.config = ControllerConfig(
             uav_id=int(uav_id), mode=mode, gains=gains_from_dict(gains, int(n)), observer=observer,
             state_source=state_source, period=1.0 / rate, info_timeout=info_timeout, max_thrust=max_thrust,
-            max_tilt=math.radians(max_tilt_deg), impedance_force_input=force_input)
+            max_tilt=math.radians(max_tilt_deg), impedance_force_input=force_input, info_plausibility=plausibility,
+            own_writer_direct=own_writer_direct)
         self.controller = Controller(params, self.config)
         self.n = int(n)
 
@@ -135,11 +190,19 @@ class ControllerNode(Node):
             return
         self._local, self._local_time = local, self._now()
 
-    def _on_info(self, msg: InformationVector) -> None:
-        if not msg.valid:
-            return  # the sender says its estimate is stale: treated as missing (its age grows)
+    def _on_info(self, msg: InformationVector, msg_info: dict) -> None:
+        """``msg_info``: rclpy's MessageInfo (a dict; Jazzy has no publisher GID, the publication sequence number
+        tells the publishers apart, fpr_control.information). Invalid vectors (the sender's estimate is stale)
+        count as missing, silently."""
+        sequence = msg_info.get("publication_sequence_number") if msg_info else None
         info = PeerInfo(int(msg.uav_id), msg.leg_angle, _vec(msg.velocity), _quat_wxyz(msg.attitude), msg.thrust)
-        reason = self.controller.receive_info(info, self._now())
+        reason = self.controller.receive_info(info, self._now(), int(sequence) if sequence else None,
+                                              bool(msg.valid))
+        table = self.controller.information
+        for line in table.take_announcements():  # once per intruder stream / takeover
+            self.get_logger().warning(f"/fpr/info: {line}")
+        for line in table.take_returns():
+            self.get_logger().info(f"/fpr/info: {line}", throttle_duration_sec=LOG_THROTTLE_S)
         if reason is not None:
             self.get_logger().warning(f"/fpr/info rejected: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
 
@@ -156,7 +219,20 @@ class ControllerNode(Node):
             self.get_logger().warning("TeleopCommand contains NaN/inf: ignored (holding the last one)",
                                       throttle_duration_sec=LOG_THROTTLE_S)
             return
-        self._teleop, self._teleop_time = command, self._now()
+        bounded = bound_command(command, self.command_limits)
+        if bounded.command is None:
+            self._teleop_refused += 1
+            self.get_logger().warning(f"TeleopCommand refused: {bounded.refused}: holding the last valid command "
+                                      f"({self._teleop_refused} refused in a row)",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
+            return
+        if self._teleop_refused:
+            self.get_logger().info(f"TeleopCommand accepted again after {self._teleop_refused} refused")
+            self._teleop_refused = 0
+        if bounded.clamped:
+            self.get_logger().warning("TeleopCommand clamped to the controller's limits: " + ", ".join(bounded.clamped),
+                                      throttle_duration_sec=LOG_THROTTLE_S)
+        self._teleop, self._teleop_time = bounded.command, self._now()
 
     def _on_imu(self, msg: Imu) -> None:
         quat = _quat_wxyz(msg.orientation)
@@ -218,6 +294,7 @@ class ControllerNode(Node):
             info.thrust = float(out.info.thrust)
             info.valid = bool(out.local_state_valid or self.controller.uses_ground_truth)
             self.info_pub.publish(info)
+            self.controller.information.note_own_publication()  # the own writer's sequence number (own echo)
 
         wr = WrenchEstimate()
         wr.header.stamp, wr.header.frame_id = stamp, "world" if self.controller.uses_ground_truth else "flat_platform"

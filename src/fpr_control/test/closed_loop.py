@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from fpr_control.controller import Controller, ControlOutput, GroundTruth
-from fpr_control.information import LocalEstimate, PeerInfo
+from fpr_control.information import InfoPlausibility, LocalEstimate, PeerInfo
 from fpr_control.reference import TeleopReference
 from fpr_model.dynamics import gravity, rk4_step, thrusts_from_wrench
 from fpr_model.geometry import make_configuration
@@ -28,6 +28,11 @@ from fpr_model.rotations import (
     rotmat_to_euler_zyx,
     rotmat_to_quat,
 )
+
+#: ζ_j plausibility for controllers in this harness: its UAVs track their attitude setpoint instantly (the first
+#: step snaps each from the identity to its setpoint, ~120° of yaw in 20 ms), a turn the default jump bound
+#: (fpr_control.information.InfoPlausibility) rightly refuses; the other bounds stay the defaults.
+HARNESS_PLAUSIBILITY = InfoPlausibility(max_angular_rate=1e6)
 
 
 def hover_state(params: FprParameters, leg_angle: float = math.radians(45.0), yaw: float = 0.3,

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from closed_loop import Sim, command, hover_state
+from closed_loop import HARNESS_PLAUSIBILITY, Sim, command, hover_state
 from fpr_control.controller import Controller, ControllerConfig, gains_from_dict
 from fpr_control.information import LocalEstimate, PeerInfo
 from fpr_model.parameters import default_parameters
@@ -22,8 +22,9 @@ YAW_OFFSETS = np.array([0.0, 1.0, -2.0])  # unknown yaw of each F0i: exercises (
 
 def _controllers(mode: str, state_source: str = "local", n: int = 3, **kwargs) -> list[Controller]:
     params = default_parameters(n)
-    return [Controller(params, ControllerConfig(uav_id=i + 1, mode=mode, gains=gains_from_dict({}, n),
-                                                state_source=state_source, **kwargs)) for i in range(n)]
+    return [Controller(params, ControllerConfig(
+        uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode=mode, gains=gains_from_dict({}, n),
+        state_source=state_source, **kwargs)) for i in range(n)]
 
 
 def _check_setpoints(outputs, max_thrust: float = 25.0) -> None:

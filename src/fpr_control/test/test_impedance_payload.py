@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pytest
-from closed_loop import Sim, command, hover_state
+from closed_loop import HARNESS_PLAUSIBILITY, Sim, command, hover_state
 from fpr_control.controller import Controller, ControllerConfig, gains_from_dict
 from fpr_model.parameters import default_parameters
 from fpr_model.rotations import quat_to_euler_zyx
@@ -31,8 +31,9 @@ ATTACH, RELEASE, END = 1.0, 6.0, 10.0  # [s]
 
 
 def _controllers(**kwargs) -> list[Controller]:
-    return [Controller(PARAMS, ControllerConfig(uav_id=i + 1, mode="impedance", gains=gains_from_dict({}, 3),
-                                                state_source="local", **kwargs)) for i in range(3)]
+    return [Controller(PARAMS, ControllerConfig(
+        uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode="impedance", gains=gains_from_dict({}, 3),
+        state_source="local", **kwargs)) for i in range(3)]
 
 
 class _Payload:

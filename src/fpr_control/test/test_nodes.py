@@ -259,3 +259,52 @@ def test_joy_script_node_plays_the_timeline(tmp_path):
         assert joys[0].axes[4] == pytest.approx(0.25) and joys[0].buttons[0] == 0
     finally:
         graph.close()
+
+
+def test_controller_node_bounds_teleop_and_refuses_a_second_zeta_publisher():
+    """Issue 12: an absurd /fpr/teleop is refused (the last valid command is kept), a slightly-out-of-range one is
+    clamped; a second publisher claiming uav_id 2 on /fpr/info is refused after the first one is established."""
+    graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("uav_id", value=1), Parameter("mode", value="communicating")])
+    try:
+        helper = graph.helper
+        statuses = []
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        local_pub = helper.create_publisher(LocalState, "/fpr/uav1/local_state", 10)
+        info_pub = helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT)
+        teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+        assert wait_for(lambda: local_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0
+                        and info_pub.get_subscription_count() > 0)
+        state = {"roll": 0.1, "legs": [0.8] * 3}
+
+        def feed():
+            local_pub.publish(_local_state())
+            msg = _teleop(roll=state["roll"])
+            msg.leg_angles = state["legs"]
+            teleop_pub.publish(msg)
+            for j in (2, 3):
+                info_pub.publish(_info(j))
+
+        timer = helper.create_timer(0.02, feed)
+        assert wait_for(lambda: statuses and statuses[-1].desired_roll == pytest.approx(0.1), timeout=8.0)
+        state.update(roll=math.radians(80.0), legs=[math.radians(150.0)] * 3)  # refused: the last valid holds
+        time.sleep(0.3)
+        assert graph.node._teleop_refused > 5
+        assert statuses[-1].desired_roll == pytest.approx(0.1)
+        assert list(statuses[-1].desired_leg_angles) == pytest.approx([0.8] * 3)
+        state.update(roll=math.radians(35.0), legs=[0.8] * 3)  # within 2x the 30 deg limit: clamped
+        assert wait_for(lambda: statuses[-1].desired_roll == pytest.approx(math.radians(30.0)), timeout=3.0)
+        assert graph.node._teleop_refused == 0
+        # an intruder claiming uav_id 2 (a fresh writer: its sequence numbers restart at 1)
+        intruder = helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT)
+        assert wait_for(lambda: intruder.get_subscription_count() > 0)
+        table = graph.node.controller.information
+        forged = _info(2, leg=1.2)
+        for _ in range(10):
+            intruder.publish(forged)
+            time.sleep(0.02)
+        assert wait_for(lambda: table.intruder_messages >= 5, timeout=3.0)
+        assert table.get(2).leg_angle == pytest.approx(0.8)
+        helper.destroy_timer(timer)
+    finally:
+        graph.close()

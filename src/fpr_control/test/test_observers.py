@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from closed_loop import Sim, command, hover_state
+from closed_loop import HARNESS_PLAUSIBILITY, Sim, command, hover_state
 from fpr_control.controller import Controller, ControllerConfig, gains_from_dict
 from fpr_control.laws import compute_model_terms, observer_inputs
 from fpr_control.observers import (
@@ -45,8 +45,9 @@ def _fly_and_observe(observers: dict, duration: float, noise=None, seed=0):
     """PD hover on the ground truth (no use of τ̂), 2 N payload from t = 0; observers fed with (P, β)
     from the (optionally noisy) state and the thrusts applied during the last period. Returns histories."""
     rng = np.random.default_rng(seed)
-    controllers = [Controller(PARAMS, ControllerConfig(uav_id=i + 1, mode="pd", gains=gains_from_dict({}, 3),
-                                                       state_source="ground_truth")) for i in range(3)]
+    controllers = [Controller(PARAMS, ControllerConfig(
+        uav_id=i + 1, info_plausibility=HARNESS_PLAUSIBILITY, mode="pd", gains=gains_from_dict({}, 3),
+        state_source="ground_truth")) for i in range(3)]
     q, nu = hover_state(PARAMS)
     sim = Sim(PARAMS, controllers, q, nu, np.zeros(3), external=lambda q, nu: PAYLOAD_FORCE)
     cmd = command(3)

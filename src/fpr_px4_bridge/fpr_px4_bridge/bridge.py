@@ -37,6 +37,16 @@ clamped to [thrust_min, 1] (``battery_compensation``, the default: the thrust re
 With ``battery_compensation`` off, f_max is taken at the fixed ``nominal_voltage`` instead, whatever PX4 reports,
 as in the first Exp. I flights before the thrust regulation (thesis §3.5.1, l.5016-5020): the produced thrust then
 falls as the battery sags, and the observers see a slowly growing negative z external force.
+Thrust ceiling (issue 12, bounded inputs): a setpoint thrust above ``thrust_refusal_ratio`` · f_max (f_max of
+(C.2) at the voltage the normalization uses right now, :meth:`Px4Bridge.max_thrust`) is REFUSED, not clamped: a
+1e9 N command means the sender is broken. The refused setpoint is not stored; the last valid one keeps streaming
+until it is ``setpoint_timeout`` old (then the stream stops and PX4's offboard-loss failsafe acts). Each refusal is
+counted (``thrust_refusals``, and in ``rejected_setpoints`` of the status) and announced by one rate-limited
+warning "setpoint thrust X N above the ceiling ... refused". A thrust in (f_max, ratio · f_max] is a controller
+saturating against a sagging battery (its own f_max is a fixed number): it is flown as before at normalized 1.0
+(counted in ``thrust_saturations``, one rate-limited warning), because refusing it would stop the stream of a
+healthy controller at full throttle. ``thrust_refusal_ratio`` = 1.0 refuses everything above f_max. Nothing above
+normalized 1.0 ever goes on MAVLink ((C.1) is clamped to [thrust_min, 1]).
 The caller serializes access (one lock).
 """
 
@@ -85,6 +95,8 @@ class BridgeConfig:
     #: [V] f_max voltage without battery compensation: 12.4 V, the charged 3S voltage (fpr_sim BatteryConfig)
     nominal_voltage: float = 12.4
     quaternion_tolerance: float = 1e-3    #: refuse setpoints with | |q| - 1 | above this
+    #: refuse setpoints with thrust above this times f_max (C.2) at the present voltage; in [1, 2] (module doc)
+    thrust_refusal_ratio: float = 1.1
     heartbeat_period: float = 1.0         #: [s] our HEARTBEAT period
     #: "estimate": PX4's time_boot_ms mapped onto the ROS clock by the telemetry's time sync (a real vehicle);
     #: "ros_time": PX4's boot clock is the ROS (simulated) clock, as for PX4 SITL in lockstep and fpr_sim's emulator
@@ -98,6 +110,8 @@ class BridgeConfig:
             raise ValueError(f"stream_rate must be >= 50 Hz, got {self.stream_rate}")
         if not 0.0 < self.setpoint_timeout < self.offboard.heartbeat_timeout + 10.0:
             raise ValueError(f"setpoint_timeout must be > 0, got {self.setpoint_timeout}")
+        if not 1.0 <= self.thrust_refusal_ratio <= 2.0:
+            raise ValueError(f"thrust_refusal_ratio must be in [1, 2], got {self.thrust_refusal_ratio}")
         if not 0.0 <= self.thrust_min < 1.0:
             raise ValueError(f"thrust_min must be in [0, 1), got {self.thrust_min}")
         if not all(math.isfinite(v) for v in (self.a_f, self.b_f, self.fallback_voltage, self.nominal_voltage)):
@@ -142,6 +156,8 @@ class BridgeStatus:
     setpoint_rate: float
     rx_garbage: int
     rejected_setpoints: int
+    thrust_refusals: int = 0  #: of rejected_setpoints: thrust above the ceiling
+    thrust_saturations: int = 0  #: setpoints in (f_max, ceiling]: flown at normalized 1.0
 
 
 @dataclass
@@ -172,6 +188,8 @@ class Px4Bridge:
         self.repetitions_sent = 0  #: SET_ATTITUDE_TARGETs that repeated an already sent setpoint (slot top-ups)
         self.voltage_fallbacks = 0
         self.stamp_fallbacks = 0  #: setpoints whose header stamp could not be used (not 0, but invalid)
+        self.thrust_refusals = 0  #: setpoints refused for a thrust above the ceiling (module doc)
+        self.thrust_saturations = 0  #: setpoints in (f_max, ceiling], flown at normalized thrust 1.0
         self._pending_events: list[LogEvent] = []
 
     # ---- events --------------------------------------------------------------------------------------------
@@ -183,7 +201,8 @@ class Px4Bridge:
         return events
 
     # ---- setpoints -----------------------------------------------------------------------------------------
-    def _validate(self, q_enu_flu, thrust_newton: float, uav_id: int) -> tuple[np.ndarray | None, str]:
+    def _validate(self, q_enu_flu, thrust_newton: float, uav_id: int,
+                  now: float) -> tuple[np.ndarray | None, str]:
         if int(uav_id) != self.config.uav_id:
             return None, f"setpoint for uav_id {uav_id} refused by the bridge of uav {self.config.uav_id}"
         q = np.asarray(q_enu_flu, dtype=float)
@@ -195,13 +214,24 @@ class Px4Bridge:
         thrust = float(thrust_newton)
         if not math.isfinite(thrust) or thrust < 0.0:
             return None, f"setpoint thrust must be finite and >= 0 N, got {thrust}"
+        f_max, voltage = self.max_thrust(now)
+        ceiling = self.config.thrust_refusal_ratio * f_max
+        if thrust > ceiling:
+            self.thrust_refusals += 1
+            return None, (f"setpoint thrust {thrust:.6g} N above the ceiling {ceiling:.2f} N "
+                          f"({self.config.thrust_refusal_ratio:g} x f_max {f_max:.2f} N (C.2) at {voltage:.2f} V): "
+                          "refused, the sender is broken; the last valid setpoint streams until setpoint_timeout")
+        if thrust > f_max:
+            self.thrust_saturations += 1
+            self._event("warn", "setpoint.saturated", f"setpoint thrust {thrust:.3f} N above f_max {f_max:.2f} N "
+                        f"(C.2) at {voltage:.2f} V (within the ceiling {ceiling:.2f} N): flown at full thrust 1.0")
         return q / norm, ""
 
     def submit_setpoint(self, q_enu_flu, thrust_newton: float, uav_id: int, now: float,
                         stamp: float = 0.0) -> SetpointResult:
         """A new setpoint (``q`` ``[w, x, y, z]`` body FLU -> local ENU, thrust [N]) with its own instant ``stamp``
         [s] on the local clock (header stamp; 0: none, 'now' is used); refused ones are never sent."""
-        q, reason = self._validate(q_enu_flu, thrust_newton, uav_id)
+        q, reason = self._validate(q_enu_flu, thrust_newton, uav_id, now)
         if q is None:
             self.rejected_setpoints += 1
             self._event("warn", "setpoint.refused", reason + " (not forwarded)")
@@ -239,6 +269,16 @@ class Px4Bridge:
         if battery is None or not math.isfinite(battery.voltage) or now - battery.stamp > _VOLTAGE_MAX_AGE:
             return math.nan
         return battery.voltage
+
+    def max_thrust(self, now: float) -> tuple[float, float]:
+        """(f_max [N], V [V]): f_max = a_f·V + b_f (C.2) at the voltage :meth:`normalized_thrust` uses now (the
+        live one, or ``fallback_voltage`` when unknown or outside the model; ``nominal_voltage`` without battery
+        compensation)."""
+        cfg = self.config
+        voltage = cfg.nominal_voltage if not cfg.battery_compensation else self.battery_voltage(now)
+        if not math.isfinite(voltage) or cfg.a_f * voltage + cfg.b_f <= 0.0:
+            voltage = cfg.fallback_voltage
+        return cfg.a_f * voltage + cfg.b_f, voltage
 
     def normalized_thrust(self, thrust_newton: float, now: float) -> float:
         """(C.1)-(C.2) with the live voltage; the fallback voltage when it is unknown or outside the model. Without
@@ -374,6 +414,8 @@ class Px4Bridge:
             setpoint_rate=self.setpoint_rate(now),
             rx_garbage=self.link.counters.rx_rejected,
             rejected_setpoints=self.rejected_setpoints,
+            thrust_refusals=self.thrust_refusals,
+            thrust_saturations=self.thrust_saturations,
         )
 
     @property

@@ -54,6 +54,10 @@ _PARAMETERS = {
                                    "(the first Exp. I flights, thesis §3.5.1)"),
     "nominal_voltage": (12.4, "[V] f_max voltage when battery_compensation is false (charged 3S)"),
     "quaternion_tolerance": (1e-3, "setpoints with | |q| - 1 | above this are refused"),
+    "thrust_refusal_ratio": (1.1, "in [1, 2]: a setpoint thrust above this x f_max (C.2) at the present voltage is "
+                                  "refused (the last valid setpoint streams until setpoint_timeout); one in "
+                                  "(f_max, ratio x f_max] is flown at normalized 1.0, announced; 1.0: refuse all "
+                                  "above f_max"),
     "heartbeat_timeout": (0.45, "[s] no frame at all from PX4 (telemetry, HEARTBEAT, ACK) for this long: 'PX4 "
                                 "silent', DISCONNECTED (logged at the next stream tick: < 0.5 s at 50 Hz)"),
     "offboard_warmup": (1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)"),
@@ -122,6 +126,7 @@ class Px4BridgeNode(Node):
             thrust_min=float(p["thrust_min"]), a_f=a_f, b_f=b_f, fallback_voltage=float(p["fallback_voltage"]),
             battery_compensation=bool(p["battery_compensation"]), nominal_voltage=float(p["nominal_voltage"]),
             quaternion_tolerance=float(p["quaternion_tolerance"]),
+            thrust_refusal_ratio=float(p["thrust_refusal_ratio"]),
             px4_boot_clock=self._boot_clock(str(p["px4_boot_clock"])),
             offboard=OffboardConfig(
                 heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),

@@ -203,6 +203,8 @@ def test_without_battery_compensation_the_thrust_is_normalized_at_the_nominal_vo
         ([1.0, 0.0, 0.0, 0.0], math.inf, 1),
         ([1.0, 0.0, 0.0, 0.0], -1.0, 1),
         ([1.0, 0.0, 0.0, 0.0], 10.0, 2),       # another UAV's setpoint
+        ([1.0, 0.0, 0.0, 0.0], 1e9, 1),        # finite but absurd (issue 12): above the thrust ceiling
+        ([1.0, 0.0, 0.0, 0.0], 40.0, 1),       # > 1.1 x f_max 34.58 N at the 12 V fallback voltage
     ],
 )
 def test_bad_setpoints_are_refused_with_a_warning_and_never_forwarded(setup, q, thrust, uav_id):
@@ -350,3 +352,55 @@ def test_any_frame_from_the_autopilot_keeps_the_link_up_other_components_do_not(
     assert not status.connected and status.state == BridgeState.DISCONNECTED
     assert status.link_age == pytest.approx(1.36 - 0.9)
     assert any(e.key == "link.down" and "PX4 silent" in e.text for e in events)
+
+
+def test_thrust_ceiling_refuses_absurd_thrust_keeps_the_last_valid_setpoint_and_counts_it(setup):
+    """Issue 12: thrust <= f_max (C.2, present voltage) passes as before; (f_max, 1.1 f_max] flies at 1.0 with one
+    warning; above 1.1 f_max it is refused (one warning naming the ceiling), counted, the last valid setpoint
+    streams until setpoint_timeout. Nothing above normalized 1.0 on the wire."""
+    bridge, peer = setup
+    connect(bridge, peer, 0.0)
+    _report_voltage(bridge, peer, 11.1, 0.01)
+    f_max, voltage = bridge.max_thrust(0.01)
+    assert voltage == pytest.approx(11.1) and f_max == pytest.approx(8.02 * 11.1 - 61.66)
+    bridge.on_teleop(TeleopMode.ARM, 0.02)
+    bridge.tick(0.02)
+    peer.read()
+    assert bridge.submit_setpoint(Q_NORTH, f_max, 1, 0.03).accepted  # exactly f_max: as today
+    assert bridge.take_events() == [] and bridge.thrust_saturations == 0
+    saturated = bridge.submit_setpoint(Q_NORTH, 1.05 * f_max, 1, 0.05)
+    assert saturated.accepted
+    events = bridge.take_events()
+    assert [e.key for e in events] == ["setpoint.saturated"] and "flown at full thrust" in events[0].text
+    bridge.tick(0.06)
+    result = bridge.submit_setpoint(Q_NORTH, 1e9, 1, 0.07)
+    assert not result.accepted and "ceiling" in result.reason
+    events = bridge.take_events()
+    assert len(events) == 1 and events[0].key == "setpoint.refused" and "1e+09 N above the ceiling" in events[0].text
+    status = bridge.status(0.07)
+    assert status.thrust_refusals == 1 and status.rejected_setpoints == 1 and status.thrust_saturations == 1
+    # the last valid setpoint (1.05 f_max, normalized 1.0) keeps streaming until setpoint_timeout (0.2 s)
+    t = 0.08
+    while t < 0.5:
+        bridge.tick(t)
+        t = round(t + 0.02, 9)
+    frames = [m for _, m in kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")]
+    assert frames and all(0.0 <= m.thrust <= 1.0 for m in frames)
+    assert frames[-1].thrust == pytest.approx(1.0)
+    assert not bridge.setpoint_fresh(0.5)  # 0.05 + 0.2 s: timed out, the stream stopped
+    assert bridge.normalized_thrust(1e9, 0.5) == 1.0
+
+
+def test_thrust_refusal_ratio_one_refuses_anything_above_f_max():
+    link = MavlinkLink("udp://127.0.0.1:0", system_id=1, target_system=1)
+    try:
+        bridge = Px4Bridge(BridgeConfig(uav_id=1, thrust_refusal_ratio=1.0), link)
+        f_max, voltage = bridge.max_thrust(0.0)
+        assert voltage == 12.0 and f_max == pytest.approx(34.58)  # no telemetry: the fallback voltage
+        assert bridge.submit_setpoint(Q_NORTH, f_max, 1, 0.0).accepted
+        assert not bridge.submit_setpoint(Q_NORTH, f_max + 0.01, 1, 0.01).accepted
+        assert bridge.thrust_refusals == 1
+    finally:
+        link.close()
+    with pytest.raises(ValueError, match="thrust_refusal_ratio"):
+        BridgeConfig(thrust_refusal_ratio=0.9)
