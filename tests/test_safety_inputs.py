@@ -11,13 +11,15 @@ ground to a 2 m hover, mode C, emulated cameras) hovers while an intruder node p
 
 Asserted on the ground truth and on every SET_ATTITUDE_TARGET the emulated PX4s receive: the platform's roll and
 pitch stay under 10°, no UAV is commanded a thrust above what it flew with in the clean hover before (×1.5, and
-never above full thrust), and each refusal is said in the log.
+never above full thrust), and each refusal is said in the log (at most 10 lines per kind: rate-limited). Measured
+before the guards (main at ba0b218): the absurd teleop alone flipped the robot (roll 180°, pitch 87°).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
@@ -117,7 +119,25 @@ class Intruder:
 
 
 @pytest.fixture(scope="module")
-def flight():
+def flight(tmp_path_factory):
+    log_path = tmp_path_factory.mktemp("safety") / "nodes.log"
+    saved_stderr = os.dup(2)  # the nodes log through rcutils to fd 2: keep it for the log-line checks
+    log_file = open(log_path, "w")  # noqa: SIM115 - closed below, after fd 2 is restored
+    os.dup2(log_file.fileno(), 2)
+    try:
+        yield from _fly()
+    finally:
+        os.dup2(saved_stderr, 2)
+        os.close(saved_stderr)
+        log_file.close()
+
+
+@pytest.fixture(scope="module")
+def node_log(flight, tmp_path_factory) -> str:
+    return next(tmp_path_factory.getbasetemp().glob("safety*/nodes.log")).read_text()
+
+
+def _fly():
     experiment = load_experiment(EXPERIMENT)
     variant = experiment.variants[0]
     options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3)
@@ -179,3 +199,16 @@ def test_no_absurd_thrust_reaches_mavlink(flight, kind):
         assert np.all(during <= 1.0), f"uav{i + 1}: full thrust commanded during {kind}"
         assert during.max() <= 1.5 * clean.max(), (
             f"uav{i + 1}: thrust {during.max():.2f} during {kind}, clean hover at most {clean.max():.2f}")
+
+
+#: per intrusion, what the refusing node says (one rate-limited line per kind)
+REFUSALS = {"teleop": "TeleopCommand refused", "setpoint": "setpoint thrust 1e+09 N above the ceiling",
+            "info": "/fpr/info: zeta_2", "imu": "IMU body rate", "marker": "detection rejected by the gate"}
+
+
+@pytest.mark.parametrize("kind", list(WINDOWS))
+def test_each_refusal_is_said(node_log, kind):
+    lines = [line for line in node_log.splitlines() if REFUSALS[kind] in line and ("refused" in line or
+                                                                                   "rejected" in line)]
+    assert lines, f"no log line refusing the {kind} intrusion"
+    assert len(lines) <= 10, f"{kind}: {len(lines)} lines, not rate-limited: {lines[:3]}"
