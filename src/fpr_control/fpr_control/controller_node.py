@@ -260,6 +260,26 @@ class ControllerNode(Node):
         self._ground_truth = gt
 
     # ---- control tick ----------------------------------------------------------------------------------
+    def _say_fallback(self, active: bool, ages, stamp) -> None:
+        """One line when the controller falls back to NC (4.32), one when it returns (issue 12: never silent)."""
+        previous = getattr(self, "_fallback_since", None)
+        now = stamp.sec + 1e-9 * stamp.nanosec
+        timeout = self.config.info_timeout
+        if active and previous is None:
+            self._fallback_since = now
+            stale = [f"zeta_{j + 1} {f'{a:.2f} s old' if math.isfinite(a) else 'never received'}"
+                     for j, a in enumerate(ages) if not a <= timeout]
+            if stale and all(not math.isfinite(a) for a in ages if not a <= timeout):  # start-up: none yet, normal
+                self.get_logger().info(f"mode {self.config.mode}: NC (4.32) until the peers' zeta arrive")
+                return
+            self.get_logger().warning(
+                f"mode {self.config.mode}: falling back to NC (4.32): {', '.join(stale) or 'own echo missing'} "
+                f"(info_timeout {timeout:g} s)", throttle_duration_sec=1.0)
+        elif not active and previous is not None:
+            self._fallback_since = None
+            self.get_logger().info(f"mode {self.config.mode}: every zeta fresh, mode {self.config.mode} active (NC "
+                                   f"for {now - previous:.2f} s)", throttle_duration_sec=1.0)
+
     def _on_tick(self) -> None:
         now = self._now()
         local = self._local if now - self._local_time <= self.local_timeout else None
@@ -310,6 +330,7 @@ class ControllerNode(Node):
         st.configured_mode, st.active_mode = MODE_CODES[self.config.mode], MODE_CODES[out.active_mode]
         st.fallback_active = bool(out.fallback_active)
         st.info_ages = [float(a) for a in out.info_ages]  # inf: never received
+        self._say_fallback(bool(out.fallback_active), out.info_ages, stamp)
         st.thrust_saturated, st.tilt_saturated = bool(out.thrust_saturated), bool(out.tilt_saturated)
         st.local_state_valid = bool(out.local_state_valid)
         st.loop_time = float(out.loop_time)
