@@ -13,8 +13,10 @@ LOG_THROTTLE_S = 2.0  # [s] per-cycle warnings: at most one per call site and pe
 
 
 def describe(text: str) -> ParameterDescriptor:
-    """ParameterDescriptor with a description (every parameter is declared with one)."""
-    return ParameterDescriptor(description=text)
+    """ParameterDescriptor with a description (every parameter is declared with one), read-only: the nodes read
+    their parameters at start-up, so ``ros2 param set`` is refused ("read-only") instead of reporting a success
+    that changes nothing (issue 14); set them with ``--ros-args -p name:=value`` or a params file."""
+    return ParameterDescriptor(description=text, read_only=True)
 
 
 def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:

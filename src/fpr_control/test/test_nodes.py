@@ -308,3 +308,25 @@ def test_controller_node_bounds_teleop_and_refuses_a_second_zeta_publisher():
         helper.destroy_timer(timer)
     finally:
         graph.close()
+
+
+@pytest.mark.parametrize("factory", [ControllerNode, TeleopNode, JoyScriptNode])
+def test_parameters_read_at_start_refuse_a_runtime_set(factory):
+    """Issue 14: `ros2 param set max_thrust 5` (or a bogus mode, a negative rate) reported success and changed
+    nothing; every parameter is read-only now, so the set is refused and the value stays."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = factory(context=context)
+        names = [n for n in ("max_thrust", "mode", "rate", "script") if node.has_parameter(n)]
+        assert names, "no parameter to try"
+        for name in names:
+            before = node.get_parameter(name).value
+            bogus = "bogus_mode" if isinstance(before, str) else -3.0 if isinstance(before, float) else -3
+            result = node.set_parameters([Parameter(name, value=bogus)])[0]
+            assert not result.successful and "read-only" in result.reason.lower(), (name, result.reason)
+            assert node.get_parameter(name).value == before
+            assert node.describe_parameter(name).read_only
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

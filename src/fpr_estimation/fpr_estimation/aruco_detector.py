@@ -48,7 +48,7 @@ class ArucoDetectorNode(Node):
         """kwargs go to rclpy.node.Node (context, namespace, parameter_overrides, ...)."""
         super().__init__("aruco_detector", **kwargs)
         for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         self._config = ArucoConfig(
             dictionary=str(p["dictionary"]), marker_id=int(p["marker_id"]), marker_size=float(p["marker_size"]),

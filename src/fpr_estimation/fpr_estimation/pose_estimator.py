@@ -83,7 +83,7 @@ class PoseEstimatorNode(Node):
         """kwargs go to rclpy.node.Node (context, namespace, parameter_overrides, ...)."""
         super().__init__("pose_estimator", **kwargs)
         for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         order = str(p["euler_order"])
         calibration = VisionCalibration(

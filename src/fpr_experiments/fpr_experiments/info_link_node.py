@@ -23,7 +23,7 @@ class InfoLinkNode(Node):
         super().__init__("info_link", **kwargs)
 
         def d(name, default, text):
-            return self.declare_parameter(name, default, ParameterDescriptor(description=text)).value
+            return self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True)).value
 
         d("n", 3, "number of UAVs (informational)")
         output = d("output_topic", "/fpr/info_link", "where the relayed zeta go (the controllers' info_input_topic)")

@@ -35,7 +35,7 @@ class PilotNode(Node):
         from fpr_control.joy_timeline import timeline_from_dict
 
         def d(name, default, text):
-            return self.declare_parameter(name, default, ParameterDescriptor(description=text)).value
+            return self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True)).value
 
         script = d("script", "", "pilot script: a joy script with `pilot` and `tasks` sections (name or path)")
         mapping_file = d("mapping_file", "", "teleop mapping YAML (empty: fpr_control's config/teleop.yaml)")

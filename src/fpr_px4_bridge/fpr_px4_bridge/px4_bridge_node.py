@@ -113,7 +113,7 @@ class Px4BridgeNode(Node):
         """``kwargs`` go to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides`` in tests)."""
         super().__init__("px4_bridge", **kwargs)
         for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         uav_id = int(p["uav_id"])
         defaults = thrust_coefficients(uav_id)

@@ -291,7 +291,7 @@ class SimulatorNode(Node):
 def _desc(text: str):
     from rcl_interfaces.msg import ParameterDescriptor
 
-    return ParameterDescriptor(description=text)
+    return ParameterDescriptor(description=text, read_only=True)
 
 
 def main(args=None) -> None:
