@@ -45,7 +45,7 @@ from fpr_model._math import norm_floats
 from fpr_model._validation import all_finite
 from fpr_model.kinematics import JacobianAt, jacobian_at
 from fpr_model.parameters import FprParameters
-from fpr_model.rotations import euler_zyx_to_quat, rotation_entries
+from fpr_model.rotations import euler_zyx_to_quat, quat_angle, rotation_entries
 
 
 @dataclass
@@ -125,12 +125,6 @@ class _Stream:
 
     sequence: int
     time: float
-
-
-def _attitude_angle(a: np.ndarray, b: np.ndarray) -> float:
-    """Rotation angle [rad] between two attitude quaternions [w, x, y, z] (normalized here)."""
-    dot = abs(float(np.dot(a, b))) / (norm_floats(a) * norm_floats(b))
-    return 2.0 * math.acos(min(1.0, dot))
 
 
 class InformationTable:
@@ -245,7 +239,10 @@ class InformationTable:
         jump = abs(info.leg_angle - previous.leg_angle)
         if jump > p.max_leg_rate * dt + p.leg_jump_slack:
             return f"leg angle jumps {math.degrees(jump):.1f} deg in {dt:.3f} s"
-        turn = _attitude_angle(info.attitude, previous.attitude)
+        try:
+            turn = quat_angle(info.attitude, previous.attitude)
+        except ValueError:
+            return "attitude is a zero quaternion"
         if turn > p.max_angular_rate * dt + p.attitude_jump_slack:
             return f"attitude turns {math.degrees(turn):.1f} deg in {dt:.3f} s"
         change = norm_floats(info.velocity - previous.velocity)

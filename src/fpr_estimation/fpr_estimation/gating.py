@@ -29,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from fpr_model.rotations import quat_from_rotvec, quat_multiply, quat_normalize
+from fpr_model.rotations import quat_angle, quat_from_rotvec, quat_multiply, quat_normalize
 
 __all__ = ["ConsistentRun", "GateConfig", "GateDecision", "InputBounds", "ReinitConfig", "Refusal",
            "check_imu_sample", "check_marker_pose", "evaluate_gate", "is_rotation"]
@@ -245,7 +245,7 @@ class ConsistentRun:
     def _consistent(self, a: _Candidate, b: _Candidate) -> bool:
         if np.linalg.norm(a.position - b.position) > self.config.position_tolerance:
             return False
-        return _angle_between(a.quaternion, b.quaternion) <= self.config.angle_tolerance
+        return quat_angle(a.quaternion, b.quaternion) <= self.config.angle_tolerance
 
     def add(self, stamp: float, position: np.ndarray, quaternion: np.ndarray) -> None:
         """A detection p_p_i [m], p_q_i [w, x, y, z] at ``stamp`` [s] (a stamp earlier than the run restarts it)."""
@@ -269,11 +269,8 @@ class ConsistentRun:
         for i, a in enumerate(self._run):
             for b in self._run[i + 1:]:
                 distance = max(distance, float(np.linalg.norm(a.position - b.position)))
-                angle = max(angle, _angle_between(a.quaternion, b.quaternion))
+                angle = max(angle, quat_angle(a.quaternion, b.quaternion))
         span = self._run[-1].stamp - self._run[0].stamp if self._run else 0.0
         return distance, angle, span
 
 
-def _angle_between(qa: np.ndarray, qb: np.ndarray) -> float:
-    """Rotation angle of ``qa⁻¹ ∘ qb`` [rad], in [0, π]."""
-    return float(2.0 * np.arccos(min(1.0, abs(float(np.dot(qa, qb))))))

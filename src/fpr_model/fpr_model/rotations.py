@@ -32,6 +32,7 @@ from fpr_model._validation import as_angles, as_array, as_scalar, as_trailing
 
 __all__ = [
     "attitude_error_vector",
+    "quat_angle",
     "euler_rate_matrix",
     "euler_rate_matrix_dot",
     "euler_rate_matrix_inverse",
@@ -459,6 +460,17 @@ def quat_integrate(q, body_rate, dt) -> np.ndarray:
     body_rate = as_trailing("body_rate", body_rate, (3,))
     dt = as_scalar("dt", dt)
     return _quat_integrate_rotvec(q, body_rate * dt)
+
+
+def quat_angle(q_a, q_b) -> float:
+    """Angle [rad, in [0, π]] of the rotation between two attitudes ``q_a``, ``q_b`` [w, x, y, z] (not necessarily
+    normalized): the angle of ``q_a^{-1} ∘ q_b``, = 2 acos |⟨q_a, q_b⟩| / (|q_a| |q_b|) (sign-invariant)."""
+    a = as_trailing("q_a", q_a, (4,))
+    b = as_trailing("q_b", q_b, (4,))
+    norms = float(np.linalg.norm(a) * np.linalg.norm(b))
+    if not norms > 0.0:
+        raise ValueError("quat_angle: a zero quaternion is no attitude")
+    return 2.0 * math.acos(min(1.0, abs(float(a @ b)) / norms))
 
 
 def quat_error(q, q_des) -> np.ndarray:

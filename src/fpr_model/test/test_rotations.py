@@ -234,3 +234,15 @@ def test_bad_inputs_name_the_argument():
         rt.quat_from_axis_angle([0, 0, 0], 1.0)
     with pytest.raises(ValueError, match="pitch"):
         rt.euler_rate_matrix_inverse(0.0, np.pi / 2)
+
+
+def test_quat_angle_is_the_rotation_angle_between_two_attitudes():
+    from fpr_model.rotations import quat_angle, quat_from_axis_angle, quat_multiply
+
+    a = quat_from_axis_angle([0.0, 0.0, 1.0], 0.3)
+    b = quat_multiply(a, quat_from_axis_angle([1.0, 1.0, 0.0], 0.7))
+    assert quat_angle(a, b) == pytest.approx(0.7, abs=1e-12)
+    assert quat_angle(a, -2.0 * b) == pytest.approx(0.7, abs=1e-12)  # sign- and scale-invariant
+    assert quat_angle(a, a) == pytest.approx(0.0, abs=1e-7)
+    with pytest.raises(ValueError):
+        quat_angle(a, [0.0, 0.0, 0.0, 0.0])

@@ -57,7 +57,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from fpr_model.battery import normalized_thrust
+from fpr_model.battery import max_thrust, normalized_thrust
 
 from fpr_px4_bridge.link import MavlinkLink
 from fpr_px4_bridge.offboard import BridgeState, LogEvent, OffboardConfig, OffboardStateMachine
@@ -276,9 +276,9 @@ class Px4Bridge:
         compensation)."""
         cfg = self.config
         voltage = cfg.nominal_voltage if not cfg.battery_compensation else self.battery_voltage(now)
-        if not math.isfinite(voltage) or cfg.a_f * voltage + cfg.b_f <= 0.0:
+        if not math.isfinite(voltage) or max_thrust(voltage, cfg.a_f, cfg.b_f) <= 0.0:
             voltage = cfg.fallback_voltage
-        return cfg.a_f * voltage + cfg.b_f, voltage
+        return max_thrust(voltage, cfg.a_f, cfg.b_f), voltage
 
     def normalized_thrust(self, thrust_newton: float, now: float) -> float:
         """(C.1)-(C.2) with the live voltage; the fallback voltage when it is unknown or outside the model. Without
