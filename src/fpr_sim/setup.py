@@ -75,6 +75,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        # realism profiles: one directory each (config/realism/<profile>/*.yaml, fpr_sim.scenario.realism_overlay)
+        *[('share/' + package_name + '/' + d, glob(d + '/*.yaml')) for d in sorted(glob('config/realism/*'))],
     ],
     install_requires=['setuptools'],
     zip_safe=False,  # the compiled kernel is loaded from a file

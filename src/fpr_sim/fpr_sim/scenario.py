@@ -40,6 +40,8 @@ import numpy as np
 from fpr_sim.px4_position_control import PositionControlConfig
 
 __all__ = [
+    "ActuationConfig",
+    "AerodynamicsConfig",
     "BatteryConfig",
     "BoardConfig",
     "CameraConfig",
@@ -49,6 +51,9 @@ __all__ = [
     "Gust",
     "InitialState",
     "JointStopConfig",
+    "LinkConfig",
+    "ModelMismatchConfig",
+    "MotionCaptureConfig",
     "PayloadEvent",
     "Px4Config",
     "QuadrotorConfig",
@@ -57,9 +62,13 @@ __all__ = [
     "TargetConfig",
     "WindConfig",
     "bundled_scenarios_dir",
+    "deep_merge",
     "load_scenario",
-    "scenario_path",
+    "realism_dir",
+    "realism_overlay",
+    "realism_profiles",
     "scenario_from_dict",
+    "scenario_path",
 ]
 
 
@@ -408,12 +417,54 @@ class TargetConfig:
 
 
 @dataclass
+class ModelMismatchConfig:
+    """Realism: the plant's TRUE parameters differ from the controllers' Table B.1 model (drawn per run from the
+    scenario seed within the stated tolerances; see src/fpr_sim/README.md, "Realism"). Off in the ideal profile."""
+
+    enabled: bool = False
+
+
+@dataclass
+class ActuationConfig:
+    """Realism: motors and thrust differ from what the bridge's (C.1)-(C.2) model assumes (per-motor spread,
+    true thrust-vs-voltage curve, thrust noise). Off in the ideal profile."""
+
+    enabled: bool = False
+
+
+@dataclass
+class AerodynamicsConfig:
+    """Realism: ground effect and rotor drag (the fan jet is :class:`FanConfig`). Off in the ideal profile."""
+
+    enabled: bool = False
+
+
+@dataclass
+class MotionCaptureConfig:
+    """Realism: the motion capture the centralized modes fly on (``/fpr/motion_capture``): noise, latency,
+    dropouts. Ideal: an exact copy of the ground truth, no delay."""
+
+    enabled: bool = False
+
+
+@dataclass
+class LinkConfig:
+    """Realism: the inter-UAV link (information vectors ζ_i) as a Wi-Fi link: latency, loss, bursts. Ideal: the
+    DDS topic as it is."""
+
+    enabled: bool = False
+
+
+@dataclass
 class Scenario:
     """Everything that defines one run, beyond the node's parameters."""
 
     name: str = "default"
     seed: int = 0
     n: int = 3
+    #: realism profile (:func:`realism_profiles`): ``ideal`` (the defaults below: unit-level tests) or ``hardware``
+    #: (config/realism/hardware/*.yaml laid under the scenario's own values, which always win)
+    realism: str = "ideal"
     initial_state: InitialState = field(default_factory=InitialState)
     plant: dict[str, Any] = field(default_factory=dict)  #: FprParameters overrides (fpr_model field names)
     quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
@@ -428,6 +479,11 @@ class Scenario:
     target: TargetConfig = field(default_factory=TargetConfig)
     payloads: list[PayloadEvent] = field(default_factory=list)
     external_wrenches: list[ExternalWrenchEvent] = field(default_factory=list)
+    mismatch: ModelMismatchConfig = field(default_factory=ModelMismatchConfig)
+    actuation: ActuationConfig = field(default_factory=ActuationConfig)
+    aerodynamics: AerodynamicsConfig = field(default_factory=AerodynamicsConfig)
+    motion_capture: MotionCaptureConfig = field(default_factory=MotionCaptureConfig)
+    link: LinkConfig = field(default_factory=LinkConfig)
 
     def leg_angles(self) -> np.ndarray:
         """Initial leg angles as an (n,) array [rad]."""
@@ -508,8 +564,70 @@ def _dataclass_from_dict(cls: type, data: Any, path: str) -> Any:
     return cls(**kwargs)
 
 
-def scenario_from_dict(data: dict | None) -> Scenario:
-    """Build and validate a :class:`Scenario` from a mapping (unknown keys refused, listing valid keys)."""
+def realism_dir() -> str:
+    """fpr_sim's realism profiles (``share/fpr_sim/config/realism`` once installed, else the source tree's)."""
+    import os
+
+    return os.path.join(os.path.dirname(bundled_scenarios_dir()), "realism")
+
+
+def realism_profiles() -> list[str]:
+    """The names of the realism profiles: ``ideal`` and one per directory of :func:`realism_dir`."""
+    import os
+
+    directory = realism_dir()
+    found = sorted(d for d in os.listdir(directory) if os.path.isdir(os.path.join(directory, d))) \
+        if os.path.isdir(directory) else []
+    return ["ideal", *[d for d in found if d != "ideal"]]
+
+
+def realism_overlay(profile: str) -> dict:
+    """The scenario overlay of realism profile ``profile``: every ``*.yaml`` of ``config/realism/<profile>/``
+    (one file per effect group), merged in file-name order (a later file wins). ``ideal`` is the empty overlay.
+    An unknown name raises ValueError listing the profiles."""
+    import os
+
+    import yaml
+
+    if profile == "ideal":
+        return {}
+    directory = os.path.join(realism_dir(), profile)
+    if not os.path.isdir(directory):
+        raise ValueError(f"realism: unknown profile {profile!r}; profiles: {', '.join(realism_profiles())}")
+    overlay: dict = {}
+    for name in sorted(os.listdir(directory)):
+        if name.endswith((".yaml", ".yml")):
+            with open(os.path.join(directory, name), encoding="utf-8") as stream:
+                part = yaml.safe_load(stream) or {}
+            if not isinstance(part, dict):
+                raise ValueError(f"realism profile {profile!r}: {name} is not a mapping")
+            overlay = deep_merge(overlay, part)
+    return overlay
+
+
+def deep_merge(base: dict, override: dict) -> dict:
+    """``override`` laid over ``base``: mappings merge key by key, anything else (lists too) is replaced."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def scenario_from_dict(data: dict | None, realism: str | None = None) -> Scenario:
+    """Build and validate a :class:`Scenario` from a mapping (unknown keys refused, listing valid keys).
+
+    Realism: the profile is ``realism`` if given (e.g. the simulator's ``realism`` parameter), else the mapping's
+    own ``realism`` key, else ``ideal``; its overlay (:func:`realism_overlay`) is laid under the mapping, so a
+    value the scenario states always wins over the profile's."""
+    data = dict(data or {})
+    profile = realism or data.get("realism") or "ideal"
+    if not isinstance(profile, str):
+        raise ValueError(f"realism: expected a profile name ({', '.join(realism_profiles())}), got {profile!r}")
+    data = deep_merge(realism_overlay(profile), data)
+    data["realism"] = profile
     scenario = _dataclass_from_dict(Scenario, data, "")
     if scenario.n < 3:
         raise ValueError(f"n: at least 3 legs are needed, got {scenario.n}")
@@ -620,13 +738,13 @@ def scenario_path(name: str) -> str:
     raise FileNotFoundError(f"scenario {name!r}: no such file, nor a bundled scenario; bundled: {', '.join(names)}")
 
 
-def load_scenario(path: str | None) -> Scenario:
+def load_scenario(path: str | None, realism: str | None = None) -> Scenario:
     """Load a scenario YAML file (a path or a bundled scenario's name, :func:`scenario_path`); ``None`` or an empty
-    path gives the default scenario."""
+    path gives the default scenario. ``realism`` (a profile name) overrides the file's ``realism`` key."""
     if not path:
-        return scenario_from_dict({})
+        return scenario_from_dict({}, realism=realism)
     import yaml
 
     with open(scenario_path(path), encoding="utf-8") as stream:
         data = yaml.safe_load(stream)
-    return scenario_from_dict(data or {})
+    return scenario_from_dict(data or {}, realism=realism)

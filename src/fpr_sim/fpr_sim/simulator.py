@@ -50,6 +50,9 @@ class SimulatorNode(Node):
         p("scenario_file", "", descriptor=_desc(
             "scenario YAML: a path, or a bundled scenario's name (config/scenarios: hover, ground_start, ...); empty: "
             "default scenario"))
+        p("realism", "", descriptor=_desc(
+            "realism profile: ideal | hardware (config/realism/); empty: the scenario's own 'realism' key (default "
+            "ideal). The scenario's explicit values always win over the profile's"))
         p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
         p("lockstep", True, descriptor=_desc(
             "wait at each control period for every streaming UAV's setpoint computed for that period"))
@@ -77,7 +80,7 @@ class SimulatorNode(Node):
         p("wait_for_clock_subscribers_timeout", 60.0, descriptor=_desc(
             "[s] wall: give up waiting for the /clock subscribers and start anyway (with a warning)"))
         get = self.get_parameter
-        self.scenario = load_scenario(get("scenario_file").value)
+        self.scenario = load_scenario(get("scenario_file").value, realism=str(get("realism").value) or None)
         options = SimulationOptions(physics_rate=float(get("physics_rate").value),
                                     control_rate=float(get("control_rate").value),
                                     lockstep=bool(get("lockstep").value),

@@ -90,3 +90,32 @@ def test_bundled_scenarios_resolve_by_name_with_or_without_yaml():
     assert scenario_path("hover").endswith("hover.yaml")
     with pytest.raises(FileNotFoundError, match=r"scenario 'hoover': no such file.*bundled: .*ground_start.*hover"):
         load_scenario("hoover")
+
+
+def test_realism_profiles_overlay_under_the_scenario(tmp_path, monkeypatch):
+    """A profile is a scenario overlay: its values apply where the scenario is silent, the scenario's win."""
+    import fpr_sim.scenario as scenario_module
+
+    profile_dir = tmp_path / "realism" / "rough"
+    profile_dir.mkdir(parents=True)
+    (profile_dir / "10_a.yaml").write_text("sensors: {gyro_noise: 0.5, accel_noise: 0.7}\nseed: 9\n")
+    (profile_dir / "20_b.yaml").write_text("sensors: {accel_noise: 0.9}\n")
+    monkeypatch.setattr(scenario_module, "realism_dir", lambda: str(tmp_path / "realism"))
+    assert scenario_module.realism_profiles() == ["ideal", "rough"]
+    rough = scenario_from_dict({"realism": "rough", "sensors": {"gyro_noise": 0.1}})
+    assert rough.realism == "rough"
+    assert rough.sensors.gyro_noise == 0.1          # the scenario's own value wins
+    assert rough.sensors.accel_noise == 0.9         # later file wins over the earlier one
+    assert rough.seed == 9
+    ideal = scenario_from_dict({"realism": "rough"}, realism="ideal")   # the caller's profile wins over the file's
+    assert ideal.realism == "ideal" and ideal.sensors == scenario_from_dict({}).sensors
+    with pytest.raises(ValueError, match="unknown profile 'nope'.*ideal, rough"):
+        scenario_from_dict({}, realism="nope")
+
+
+def test_bundled_hardware_profile_loads():
+    from fpr_sim.scenario import realism_profiles
+
+    assert "hardware" in realism_profiles()
+    assert scenario_from_dict({}, realism="hardware").realism == "hardware"
+    assert scenario_from_dict({}).realism == "ideal"
