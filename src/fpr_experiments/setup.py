@@ -18,6 +18,7 @@ setup(
         ('share/' + package_name + '/config/models', glob('config/models/*.yaml')),
         ('share/' + package_name + '/config/mappings', glob('config/mappings/*.yaml')),
         ('share/' + package_name + '/config/thesis', glob('config/thesis/*.yaml')),
+        ('share/' + package_name + '/config/calibration', glob('config/calibration/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -33,6 +34,7 @@ setup(
             'node_group = fpr_experiments.node_group:main',
             'pilot = fpr_experiments.pilot_node:main',
             'info_link = fpr_experiments.info_link_node:main',
+            'calibrate = fpr_experiments.calibration:main',
         ],
     },
 )
