@@ -51,8 +51,8 @@ _OK = 0
 # layout kinds and slot names (enums of plant_kernel.c, in order)
 _LAYOUTS = {
     0: ("x", "quat", "rate", "rotors", "rotor_commands", "charge", "tip_velocity", "yaw_anchors", "wind",
-        "platform_force", "platform_moment", "rotor_factors", "uav_forces", "current", "tip_position", "tip_acceleration", "contact",
-        "ground_active", "size"),
+        "platform_force", "platform_moment", "rotor_factors", "uav_forces", "current", "tip_position",
+        "tip_acceleration", "contact", "ground_active", "size"),
     1: ("quat", "rate", "previous", "integral", "command_quat", "thrust", "armed", "landed", "feedforward",
         "f_max", "setpoint", "integral_out", "commands", "size"),
     2: ("quat", "rate", "rotors", "rotor_commands", "moments", "charge", "rotor_factors", "current", "size"),
