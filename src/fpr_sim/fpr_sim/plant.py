@@ -28,6 +28,12 @@ The structure state is integrated in platform-body velocities ξ = [R_pᵀ v_p, 
 The 1 kHz loop runs on plain Python floats (numpy costs ~1 µs per call on 3-vectors); its results are checked
 against frozen trajectories of the former numpy implementation in test/test_plant_oracle.py (to 1e-10).
 
+Realism (scenario ``mismatch``, ``actuation``, ``aerodynamics``; :mod:`fpr_sim.plant_realism`): the TRUE
+parameters may be drawn off Table B.1 (:func:`true_parameters`), the fleet gets the true (C.2) curve, motor lag,
+quadrotor inertia and battery resistance, and at the start of each step the per-rotor produced-thrust factors
+(gain spread × noise × ground effect) and the rotor drag on each quadrotor are computed here (held over the
+step, inputs of both kernels). With every effect off nothing of this runs.
+
 Two implementations of steps 1-3 (``Plant.kernel``): this module (the reference, :meth:`Plant._advance`) and
 the optional compiled kernel of :mod:`fpr_sim._kernels` (a C port of the same code, ~7× faster), selected by
 ``Plant(..., kernel=)`` or ``$FPR_SIM_KERNEL`` (auto | compiled | python; auto uses the compiled kernel when it
@@ -47,6 +53,7 @@ from fpr_model.rotations import _quat_to_rotmat, rotmat_to_quat
 
 from fpr_sim._kernels import PlantKernel, resolve_kernel
 from fpr_sim.environment import Environment
+from fpr_sim.plant_realism import PlantRealism, draw_model_mismatch
 from fpr_sim.quadrotor import AttitudeCommand, QuadrotorFleet
 from fpr_sim.scalar_math import rotation_entries
 from fpr_sim.scenario import Scenario
@@ -56,8 +63,11 @@ __all__ = ["GroundTruth", "Plant", "joint_stop_moment", "true_parameters"]
 
 
 def true_parameters(scenario: Scenario) -> FprParameters:
-    """The plant's own parameters: Table B.1 defaults overridden by ``scenario.plant`` (fpr_model names)."""
-    return parameters_from_dict(dict(scenario.plant), base=default_parameters(scenario.n))
+    """The plant's own parameters: Table B.1 defaults, overridden by the model-mismatch draws
+    (:func:`fpr_sim.plant_realism.draw_model_mismatch`, when ``scenario.mismatch`` is enabled), overridden by
+    ``scenario.plant`` (fpr_model names: a value the scenario states wins over the draw)."""
+    overrides = {**draw_model_mismatch(scenario), **scenario.plant}
+    return parameters_from_dict(overrides, base=default_parameters(scenario.n))
 
 
 def joint_stop_moment(theta: float, rate: float, lower: float, upper: float, stiffness: float,
@@ -102,13 +112,16 @@ class Plant:
         #: 'compiled' (the C kernel of fpr_sim._kernels runs the step) or 'python' (this module, the reference);
         #: requested by ``kernel`` = 'auto' | 'compiled' | 'python' (None: $FPR_SIM_KERNEL, default 'auto')
         self.kernel = resolve_kernel(kernel, scenario.n)
+        #: the realism effects of the plant (draws, thrust factors, rotor drag; fpr_sim.plant_realism)
+        self.realism = PlantRealism(scenario, float(dt))
         self.params = params if params is not None else true_parameters(scenario)
         if self.params.n != scenario.n:
             raise ValueError(f"plant parameters have n = {self.params.n}, scenario n = {scenario.n}")
         self.n = scenario.n
         self.dt = float(dt)
         self.structure = StructureDynamics(self.params, kernel=self.kernel)
-        self.fleet = QuadrotorFleet(self.n, scenario.quadrotor, scenario.px4, scenario.battery, kernel=self.kernel)
+        self.fleet = QuadrotorFleet(self.n, self.realism.quadrotor, scenario.px4, self.realism.battery,
+                                    kernel=self.kernel)
         self.environment = Environment(scenario)
         self.gear = float(scenario.quadrotor.landing_gear_height)
         self.uav_masses = np.array(self.params.uav_masses)
@@ -148,6 +161,7 @@ class Plant:
         self._tip_acceleration_list = [(0.0, 0.0, 0.0)] * self.n
         self._yaw_anchors = [math.nan] * self.n  # landing-gear yaw friction anchors [rad] (NaN: not touching)
         self._air_list: list[float] | None = None  # air velocities of the step (see _air_velocities), None: still air
+        self._uav_force_list: list[tuple] | None = None  # realism: rotor drag (n, 3) world [N] of the step, or None
         self.reset_to_initial_state()
         # the wind generator's default reference point: the quadrotors' centroid in the initial state (thesis
         # Exp. III measured the wind speed there, at hover height)
@@ -226,7 +240,7 @@ class Plant:
             forces = thrusts_from_wrench(self.params, q, gravity(self.params, q))
             thrust = np.linalg.norm(forces, axis=1)
             self.fleet.quat = self.default_uav_attitudes(forces)
-            self.fleet.hover_rotor_state(thrust)
+            self.fleet.hover_rotor_state(thrust, self.realism.rotor_gains)
             # hovering already: the battery delivers the hover current, so the terminal voltage (and f_max(V),
             # BATTERY_STATUS) is the loaded one from t = 0, as it will be after the first step
             self.fleet.battery.update(thrust, 0.0)
@@ -437,6 +451,8 @@ class Plant:
         if payload != self.structure.payload_mass:
             self.structure.set_payload_mass(payload)
         self._air_list = self._air_velocities() if env.has_wind else None
+        if self.realism.active:
+            self._realism_inputs()
         if self.scenario.external_wrenches:
             force, moment = env.platform_wrench(self.time)
             self._platform_force_list = force.tolist()
@@ -448,6 +464,28 @@ class Plant:
             self._advance()
         self.time = (self.steps + 1) * self.dt
         self.steps += 1
+
+    def _realism_inputs(self) -> None:
+        """The realism inputs of this step, from the state at its start (held over the step, both kernels): the
+        per-rotor produced-thrust factors (``fleet.rotor_factors``) and the rotor drag on each quadrotor
+        (``_uav_force_list``, world [N])."""
+        realism = self.realism
+        if self._tips is None:
+            self._tips = self._tip_kinematics_list(self._x_list)
+        fleet = self.fleet
+        if realism.has_factors:
+            fleet.rotor_factors = realism.thrust_factors(self._tips[0])
+        if realism.rotor_drag > 0.0:
+            self._uav_force_list = realism.drag_forces(fleet._quat, fleet._rotors, fleet.rotor_factors,
+                                                       self._tips[1], self._air_list)
+
+    def mismatch_report(self) -> dict:
+        """The plant's true values where they differ from the controllers' model, for experiment reports: the
+        realism draws (:meth:`fpr_sim.plant_realism.PlantRealism.report`) and the true FprParameters in use
+        (``true_parameters``, fpr_model.parameters.parameters_to_dict)."""
+        from fpr_model.parameters import parameters_to_dict
+
+        return {**self.realism.report(), "true_parameters": parameters_to_dict(self.params)}
 
     def _air_velocities(self) -> list[float]:
         """Air velocity [m/s] (world) now at the platform centre P, at each quadrotor B_i and at each leg's middle
@@ -490,6 +528,9 @@ class Plant:
         self._anchor_list = env.ground.anchors.tolist()
         self._stage_contact = 0.0
         thrust = fleet.thrust_vectors_list()
+        if self._uav_force_list is not None:  # realism: the rotor drag, held over the step like the thrust
+            thrust = [(t0 + f0, t1 + f1, t2 + f2) for (t0, t1, t2), (f0, f1, f2) in
+                      zip(thrust, self._uav_force_list, strict=True)]
         # classical RK4 on the structure state (thrusts held over the step)
         h = 0.5 * dt
         k1 = self._derivative(x, thrust)
@@ -658,6 +699,8 @@ class Plant:
         else:
             tip = np.zeros((n, 3))
         mids = np.zeros((n, 3))
+        if self._uav_force_list is not None:  # realism: the rotor drag of the last step
+            tip = tip + np.array(self._uav_force_list)
         if self.environment.has_wind:
             wind = self.scenario.wind
             air = np.reshape(self._air_velocities(), (1 + 2 * n, 3))

@@ -15,6 +15,9 @@ Vectorized over the n vehicles (arrays with a leading axis n). Per vehicle, with
 - collective command ``f_t = u_f · f_max(V)`` ((C.1) inverted, (C.2)) with the battery voltage V of
   :class:`Battery` (it drops over the flight, Table C.1 curve per vehicle);
 - first-order motor lag ``Ṫ_j = (T_j,cmd − T_j)/τ_m``;
+- produced rotor thrust ``k_ij T_j`` with the per-rotor factors ``rotor_factors`` (realism: thrust gain spread,
+  thrust noise and ground effect, :mod:`fpr_sim.plant_realism`; None: k = 1, the ideal plant) held over a step:
+  they scale the rotors' force and moments (3.41), not the battery current (the motors' state);
 - rotational dynamics (2.92): ``q̇ = ½ q ∘ [0, ω]``, ``I ω̇ = m − ω × I ω`` with ``m`` the rotor moments plus
   the external body moment (spherical-joint offset moment (2.93), ground), integrated with RK4.
 """
@@ -202,6 +205,8 @@ class QuadrotorFleet:
         self.previous_rate = np.zeros((n, 3))
         self.rate_setpoint = np.zeros((n, 3))
         self.f_max = self.max_thrust()
+        #: per-rotor produced-thrust factors (n, 4) held over the next step (set by the plant each step), or None
+        self.rotor_factors: list[list[float]] | None = None
         self._compiled = QuadKernel(self) if self.kernel == "compiled" else None
 
     quat = property(lambda self: np.array(self._quat), lambda self, value: setattr(self, "_quat", _rows(value)))
@@ -228,8 +233,11 @@ class QuadrotorFleet:
         return self._quat
 
     def thrust(self) -> np.ndarray:
-        """Actual collective thrust along body +z [N], (n,)."""
-        return np.array([sum(r) for r in self._rotors])
+        """Actual (produced) collective thrust along body +z [N], (n,): Σ_j k_ij T_j."""
+        if self.rotor_factors is None:
+            return np.array([sum(r) for r in self._rotors])
+        return np.array([k[0] * r[0] + k[1] * r[1] + k[2] * r[2] + k[3] * r[3]
+                         for k, r in zip(self.rotor_factors, self._rotors, strict=True)])
 
     def thrust_vectors(self) -> np.ndarray:
         """Thrust vectors in the world frame f_i = R_bi [0, 0, f_t,i] [N], (n, 3)."""
@@ -238,14 +246,23 @@ class QuadrotorFleet:
     def thrust_vectors_list(self) -> list[tuple[float, float, float]]:
         """:meth:`thrust_vectors` as plain floats (the 1 kHz loop): third column of (A.60) times f_t."""
         out = []
-        for (w, x, y, z), (t1, t2, t3, t4) in zip(self._quat, self._rotors, strict=True):
-            f = t1 + t2 + t3 + t4
+        factors = self.rotor_factors
+        for i, ((w, x, y, z), (t1, t2, t3, t4)) in enumerate(zip(self._quat, self._rotors, strict=True)):
+            if factors is None:
+                f = t1 + t2 + t3 + t4
+            else:
+                k = factors[i]
+                f = k[0] * t1 + k[1] * t2 + k[2] * t3 + k[3] * t4
             out.append((2.0 * (x * z + w * y) * f, 2.0 * (y * z - w * x) * f, (w * w - x * x - y * y + z * z) * f))
         return out
 
-    def hover_rotor_state(self, thrust: np.ndarray) -> None:
-        """Set rotors (and their commands) to produce ``thrust`` [N] (n,) with zero moment (initial hover)."""
-        self._rotors = [[0.25 * t] * 4 for t in _floats(thrust)]
+    def hover_rotor_state(self, thrust: np.ndarray, gains: list[list[float]] | None = None) -> None:
+        """Set rotors (and their commands) to produce ``thrust`` [N] (n,) with zero moment (initial hover); with
+        per-rotor thrust ``gains`` (n, 4) each rotor state is ``T/4 / k_ij`` (the produced thrusts are equal)."""
+        if gains is None:
+            self._rotors = [[0.25 * t] * 4 for t in _floats(thrust)]
+        else:
+            self._rotors = [[0.25 * t / k for k in row] for t, row in zip(_floats(thrust), gains, strict=True)]
         self._rotor_commands = [list(r) for r in self._rotors]
 
     # ----------------------------------------------------------------------------------------------
@@ -346,12 +363,20 @@ class QuadrotorFleet:
         h = 0.5 * dt
         sixth = dt / 6.0
         quats, rates, rotors = [], [], []
-        for q, w, r, cmd, m in zip(self._quat, self._rate, self._rotors, self._rotor_commands, moments, strict=True):
+        factors = self.rotor_factors
+        for i, (q, w, r, cmd, m) in enumerate(zip(self._quat, self._rate, self._rotors, self._rotor_commands, moments,
+                                                  strict=True)):
             t1, t2, t3, t4 = r
             e1, e2, e3, e4 = cmd[0] - t1, cmd[1] - t2, cmd[2] - t3, cmd[3] - t4
+            # produced thrusts k_j T_j and their stage changes k_j e_j (factors: realism, None = 1)
+            p1, p2, p3, p4, d1, d2, d3, d4 = t1, t2, t3, t4, e1, e2, e3, e4
+            if factors is not None:
+                c1, c2, c3, c4 = factors[i]
+                p1, p2, p3, p4 = c1 * t1, c2 * t2, c3 * t3, c4 * t4
+                d1, d2, d3, d4 = c1 * e1, c2 * e2, c3 * e3, c4 * e4
             # moment of the rotors at T_0 (plus the external moment) and its change per unit stage offset of T
-            base = (arm * (t2 - t4) + m[0], arm * (t3 - t1) + m[1], kappa * (-t1 + t2 - t3 + t4) + m[2])
-            slope = (arm * (e2 - e4) / tau, arm * (e3 - e1) / tau, kappa * (-e1 + e2 - e3 + e4) / tau)
+            base = (arm * (p2 - p4) + m[0], arm * (p3 - p1) + m[1], kappa * (-p1 + p2 - p3 + p4) + m[2])
+            slope = (arm * (d2 - d4) / tau, arm * (d3 - d1) / tau, kappa * (-d1 + d2 - d3 + d4) / tau)
             # stage s evaluates the rotors at T_0 + offset_s·e/τ_m (offsets 0, h, h·β2, dt·β3)
             y = q + w
             k1 = _attitude_derivative(y, base, slope, 0.0, i0, i1, i2)

@@ -418,25 +418,79 @@ class TargetConfig:
 
 @dataclass
 class ModelMismatchConfig:
-    """Realism: the plant's TRUE parameters differ from the controllers' Table B.1 model (drawn per run from the
-    scenario seed within the stated tolerances; see src/fpr_sim/README.md, "Realism"). Off in the ideal profile."""
+    """Realism: the plant's TRUE parameters differ from the controllers' Table B.1 model (thesis Appendix B,
+    l.9808-9811), each drawn once per run, uniformly within ``±`` the half-width given here, from
+    ``SeedSequence([seed, MISMATCH_SEED_STREAM])`` (fpr_sim.plant_realism.draw_model_mismatch). Off (and every
+    half-width 0) in the ideal profile; a half-width 0 leaves that parameter exact. Values the scenario states in
+    ``plant:`` win over the draw. The hardware values and their reasons are in src/fpr_sim/README.md ("Realism")
+    and config/realism/hardware/10_model_mismatch.yaml.
+
+    Not modelled: per-leg lengths, per-leg anchor radii / angles and per-leg masses (FprParameters has one leg
+    length, one leg mass and the symmetric anchor layout α_i = 2π(i−1)/n; the structure's fitted mass-matrix basis
+    and the compiled kernel assume that symmetry), so ``leg_length`` etc. are common draws for all legs.
+    """
 
     enabled: bool = False
+    platform_mass: float = 0.0  #: ± [kg] on m_p
+    uav_mass: float = 0.0  #: ± [kg] on each m_b,i (independent draws)
+    leg_mass: float = 0.0  #: ± [kg] on m_l (one draw, all legs)
+    platform_com_xy: float = 0.0  #: ± [m] on s_p,x and s_p,y (independent)
+    platform_com_z: float = 0.0  #: ± [m] on s_p,z
+    leg_com: float = 0.0  #: ± [m] on s_l,x (along the leg)
+    platform_inertia: float = 0.0  #: ± relative [-] on each diagonal entry of I_p
+    leg_inertia: float = 0.0  #: ± relative [-] on each diagonal entry of I_l
+    leg_length: float = 0.0  #: ± [m] on l (one draw, all legs)
+    platform_radius: float = 0.0  #: ± [m] on r
+    joint_offset: float = 0.0  #: ± [m] on d of (2.93)
+    joint_offset_angle: float = 0.0  #: ± [rad] on β
+    quadrotor_inertia: float = 0.0  #: ± relative [-] on each diagonal entry of ``quadrotor.inertia`` (all UAVs)
 
 
 @dataclass
 class ActuationConfig:
-    """Realism: motors and thrust differ from what the bridge's (C.1)-(C.2) model assumes (per-motor spread,
-    true thrust-vs-voltage curve, thrust noise). Off in the ideal profile."""
+    """Realism: motors and thrust differ from what the bridge's (C.1)-(C.2) model assumes (fpr_model.battery,
+    Table C.1), drawn per run from ``SeedSequence([seed, ACTUATION_SEED_STREAM])``
+    (fpr_sim.plant_realism.draw_actuation); the thrust noise from its own stream. Every knob off at 0.
+
+    - true thrust curve per UAV i: ``f_max,i = a_f,i (1 + ε_a,i) V + b_f,i + δ_b,i``, ε_a uniform in
+      ±``thrust_slope_error``, δ_b uniform in ±``thrust_offset_error`` [N] (the plant's (C.2); the bridge keeps
+      Table C.1);
+    - per-rotor thrust gain ``k_ij = 1 + ε_ij``, ε uniform in ±``rotor_thrust_spread``: rotor j of UAV i produces
+      ``k_ij T_ij`` (a moment imbalance the PX4 rate integrator must hold, (3.41) with unequal c_T);
+    - thrust noise: produced thrust × ``(1 + σ ξ_ij(t))``, ξ a unit-variance first-order Gauss-Markov process per
+      rotor with time constant ``thrust_noise_time_constant``, σ = ``thrust_noise``;
+    - ``motor_time_constant`` [s] > 0 replaces ``quadrotor.motor_time_constant`` (0: keep it);
+    - ``battery_internal_resistance`` [Ω] > 0 replaces ``battery.internal_resistance`` (0: keep it).
+    """
 
     enabled: bool = False
+    thrust_slope_error: float = 0.0  #: ± relative [-] on a_f of (C.2), per UAV
+    thrust_offset_error: float = 0.0  #: ± [N] on b_f of (C.2), per UAV
+    rotor_thrust_spread: float = 0.0  #: ± relative [-] on each rotor's thrust gain
+    thrust_noise: float = 0.0  #: σ relative [-] of the multiplicative per-rotor thrust noise
+    thrust_noise_time_constant: float = 0.05  #: [s] of its Gauss-Markov process
+    motor_time_constant: float = 0.0  #: [s] first-order motor lag (0: ``quadrotor.motor_time_constant``)
+    battery_internal_resistance: float = 0.0  #: [Ω] (0: ``battery.internal_resistance``)
 
 
 @dataclass
 class AerodynamicsConfig:
-    """Realism: ground effect and rotor drag (the fan jet is :class:`FanConfig`). Off in the ideal profile."""
+    """Realism: ground effect and rotor drag (the fan jet is :class:`FanConfig`). Off in the ideal profile.
+
+    - ground effect (Cheeseman & Bennett 1955): each UAV's thrust × ``1 / (1 − (R / 4z)²)``, R = ``rotor_radius``
+      [m] (0: off), z the rotor plane's height above the ground (CoM height + ``rotor_height``), clamped to
+      ``z ≥ ground_effect_min_ratio · R`` (the law diverges at z = R/4; 0.5 caps the gain at 4/3);
+    - rotor drag (Mahony, Kumar & Corke 2012; Faessler, Franchi & Scaramuzza 2018): on each UAV
+      ``f = −c · f_t · (I − z_b z_bᵀ)(v − w)`` [N], c = ``rotor_drag`` [s/m] (0: off), f_t its thrust, v its
+      velocity, w the air velocity there, z_b its rotor axis (world). It replaces ``wind.uav_drag`` (isotropic,
+      wind only): the hardware profile sets ``wind.uav_drag: 0``.
+    """
 
     enabled: bool = False
+    rotor_radius: float = 0.0  #: R [m] of the ground-effect law (0: no ground effect)
+    rotor_height: float = 0.0  #: [m] rotor plane above the quadrotor's CoM
+    ground_effect_min_ratio: float = 0.5  #: clamp z/R >= this [-]
+    rotor_drag: float = 0.0  #: c [s/m]: in-plane drag per newton of thrust per m/s of airspeed (0: off)
 
 
 @dataclass
@@ -641,6 +695,7 @@ def scenario_from_dict(data: dict | None, realism: str | None = None) -> Scenari
         raise ValueError(f"board.normal: expected a non-zero 3-vector, got {scenario.board.normal}")
     _validate_board(scenario.board, normal)
     _validate_fan(scenario.wind.fan)
+    _validate_realism_physics(scenario)
     for k, payload in enumerate(scenario.payloads):
         _validate_payload(payload, f"payloads[{k}]")
     target = scenario.target
@@ -694,6 +749,26 @@ def _validate_fan(fan: FanConfig) -> None:
             raise ValueError(f"wind.fan.{name}: must be finite and >= 0, got {value}")
     if not fan.end_time > fan.start_time:
         raise ValueError(f"wind.fan.end_time ({fan.end_time} s) must be after start_time ({fan.start_time} s)")
+
+
+def _validate_realism_physics(scenario: Scenario) -> None:
+    """Every knob of ``mismatch``, ``actuation`` and ``aerodynamics`` is a finite value >= 0 (half-widths, σ,
+    time constants, lengths); relative half-widths stay below 1 (a parameter cannot be drawn to 0 or below)."""
+    for section in ("mismatch", "actuation", "aerodynamics"):
+        config = getattr(scenario, section)
+        for item in dataclasses.fields(config):
+            value = getattr(config, item.name)
+            if isinstance(value, bool):
+                continue
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{section}.{item.name}: must be finite and >= 0, got {value}")
+    relative = [("mismatch", name) for name in ("platform_inertia", "leg_inertia", "quadrotor_inertia")]
+    relative += [("actuation", "thrust_slope_error"), ("actuation", "rotor_thrust_spread")]
+    for section, name in relative:
+        if getattr(getattr(scenario, section), name) >= 1.0:
+            raise ValueError(f"{section}.{name}: a relative half-width must be < 1")
+    if scenario.actuation.thrust_noise > 0.0 and scenario.actuation.thrust_noise_time_constant <= 0.0:
+        raise ValueError("actuation.thrust_noise_time_constant: must be > 0 with thrust_noise > 0")
 
 
 def _validate_payload(payload: PayloadEvent, name: str) -> None:

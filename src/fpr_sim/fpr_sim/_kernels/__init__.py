@@ -41,7 +41,7 @@ __all__ = ["KERNEL_CHOICES", "KERNEL_ENV", "KernelStatus", "PlantKernel", "QuadK
 KERNEL_ENV = "FPR_SIM_KERNEL"
 KERNEL_CHOICES = ("auto", "compiled", "python")
 #: must equal FPR_KERNEL_ABI in plant_kernel.c
-_ABI = 3
+_ABI = 4
 _LIBRARY_STEM = "_fpr_plant_kernel"
 _SOURCE = Path(__file__).with_name("plant_kernel.c")
 _LOG = logging.getLogger("fpr_sim.kernels")
@@ -51,16 +51,18 @@ _OK = 0
 # layout kinds and slot names (enums of plant_kernel.c, in order)
 _LAYOUTS = {
     0: ("x", "quat", "rate", "rotors", "rotor_commands", "charge", "tip_velocity", "yaw_anchors", "wind",
-        "platform_force", "platform_moment", "current", "tip_position", "tip_acceleration", "contact",
-        "ground_active", "size"),
+        "platform_force", "platform_moment", "rotor_factors", "uav_forces", "current", "tip_position",
+        "tip_acceleration", "contact", "ground_active", "size"),
     1: ("quat", "rate", "previous", "integral", "command_quat", "thrust", "armed", "landed", "feedforward",
         "f_max", "setpoint", "integral_out", "commands", "size"),
-    2: ("quat", "rate", "rotors", "rotor_commands", "moments", "charge", "current", "size"),
+    2: ("quat", "rate", "rotors", "rotor_commands", "moments", "charge", "rotor_factors", "current", "size"),
     3: ("cos", "sin", "xi", "gravity", "force", "out", "size"),
 }
 _PLANT, _CONTROL, _QUAD, _ACCELERATE = 0, 1, 2, 3
 _FLAG_IDEAL = 1
 _FLAG_WIND = 2
+_FLAG_FACTORS = 4  #: the realism's per-rotor thrust factors are given (fpr_sim.plant_realism)
+_FLAG_UAV_FORCE = 8  #: a held world force on each quadrotor is given (rotor drag)
 
 
 class FprQuadModel(ctypes.Structure):
@@ -129,7 +131,7 @@ class _Library:
         pointer = ctypes.c_void_p
         lib.fpr_plant_step.argtypes = [pointer, pointer, pointer, pointer, ctypes.c_double, ctypes.c_int]
         lib.fpr_quad_control.argtypes = [pointer, pointer, ctypes.c_int]
-        lib.fpr_quad_step.argtypes = [pointer, pointer, ctypes.c_double]
+        lib.fpr_quad_step.argtypes = [pointer, pointer, ctypes.c_double, ctypes.c_int]
         lib.fpr_structure_accelerate.argtypes = [ctypes.c_int, pointer, pointer]
         for function in (lib.fpr_plant_step, lib.fpr_quad_control, lib.fpr_quad_step, lib.fpr_structure_accelerate):
             function.restype = ctypes.c_int
@@ -329,6 +331,7 @@ class QuadKernel:
         self._quad_io = np.zeros(self._quad_layout["size"])
         self._control_pointer = self._control_io.ctypes.data
         self._quad_pointer = self._quad_io.ctypes.data
+        self._unit_factors = [1.0] * (4 * n)
 
     def control(self, fleet, command, rates: list[list[float]], on_ground: list[bool]) -> bool:
         """Run the controller update into ``fleet``; False (nothing changed) when the inputs are not the plain
@@ -372,10 +375,12 @@ class QuadKernel:
         if len(moments) != n or any(len(m) != 3 for m in moments):
             raise ValueError(f"body moments: expected {n} rows of 3, got {moments}")
         io = self._quad_io
+        factors = fleet.rotor_factors
         io[:layout["current"]] = list(chain(
             chain.from_iterable(fleet._quat), chain.from_iterable(fleet._rate), chain.from_iterable(fleet._rotors),
-            chain.from_iterable(fleet._rotor_commands), chain.from_iterable(moments), battery._charge_used))
-        self._step(self._model_pointer, self._quad_pointer, dt)
+            chain.from_iterable(fleet._rotor_commands), chain.from_iterable(moments), battery._charge_used,
+            self._unit_factors if factors is None else chain.from_iterable(factors)))
+        self._step(self._model_pointer, self._quad_pointer, dt, 0 if factors is None else 1)
         out = io.tolist()
         _unpack_fleet(fleet, out, layout, n)
 
@@ -457,6 +462,8 @@ class PlantKernel:
         self._anchors = None
         self._anchors_pointer = 0
         self._still_air = [0.0] * (3 * (1 + 2 * n))
+        self._unit_factors = [1.0] * (4 * n)
+        self._no_forces = [0.0] * (3 * n)
 
     def advance(self, plant) -> bool:
         """Advance ``plant`` by one step in C (Plant.step's body after the scheduling); False (nothing
@@ -464,12 +471,16 @@ class PlantKernel:
         n = self.n
         fleet = plant.fleet
         wind = plant._air_list  # 3 (1 + 2n) air velocities [P, B_1..B_n, leg middles] or None
+        factors = fleet.rotor_factors  # (n, 4) or None (realism)
+        forces = plant._uav_force_list  # (n, 3) or None (realism: rotor drag)
         io = self._io
         io[:self._inputs] = list(chain(
             plant._x_list, chain.from_iterable(fleet._quat), chain.from_iterable(fleet._rate),
             chain.from_iterable(fleet._rotors), chain.from_iterable(fleet._rotor_commands),
             fleet.battery._charge_used, chain.from_iterable(plant._tip_velocity_list), plant._yaw_anchors,
-            self._still_air if wind is None else wind, plant._platform_force_list, plant._platform_moment_list))
+            self._still_air if wind is None else wind, plant._platform_force_list, plant._platform_moment_list,
+            self._unit_factors if factors is None else chain.from_iterable(factors),
+            self._no_forces if forces is None else chain.from_iterable(forces)))
         basis = plant.structure._basis
         if basis is not self._basis:  # a new basis after a payload change
             self._basis_pointer = _pointer(basis, (1 + 4 * n, (6 + n) ** 2))
@@ -478,7 +489,8 @@ class PlantKernel:
         if anchors is not self._anchors:
             self._anchors_pointer = _pointer(anchors, (n + 1, 2))
             self._anchors = anchors
-        flags = (_FLAG_IDEAL if plant.ideal_attitude else 0) | (0 if wind is None else _FLAG_WIND)
+        flags = ((_FLAG_IDEAL if plant.ideal_attitude else 0) | (0 if wind is None else _FLAG_WIND)
+                 | (0 if factors is None else _FLAG_FACTORS) | (0 if forces is None else _FLAG_UAV_FORCE))
         status = self._function(self._model_pointer, self._basis_pointer, self._anchors_pointer, self._io_pointer,
                                 plant.dt, flags)
         if status != _OK:

@@ -28,7 +28,7 @@
 #endif
 
 /* Bumped whenever a struct, a buffer layout or a function signature changes (checked by the loader). */
-#define FPR_KERNEL_ABI 3
+#define FPR_KERNEL_ABI 4
 #define FPR_MAX_N 16
 #define FPR_MAX_N9 (6 + FPR_MAX_N)
 /* math.pi (M_PI is not C99) */
@@ -98,25 +98,29 @@ enum { FPR_LAYOUT_PLANT = 0, FPR_LAYOUT_CONTROL = 1, FPR_LAYOUT_QUAD = 2, FPR_LA
 
 /* plant step buffer: inputs first (x .. platform moment), then outputs; x, quat, rate, rotors, charge,
    tip velocity and yaw anchors are updated in place. P_WIND: the air velocities (world) held over the step at
-   the platform centre, the n quadrotors and the n leg middles, 3 (1 + 2n) doubles (Plant._air_velocities). */
+   the platform centre, the n quadrotors and the n leg middles, 3 (1 + 2n) doubles (Plant._air_velocities).
+   P_FACTOR: the per-rotor produced-thrust factors (n, 4) of the realism effects (read with FPR_FLAG_FACTORS);
+   P_UAV_FORCE: a world force on each quadrotor (n, 3), the rotor drag (read with FPR_FLAG_UAV_FORCE); both held
+   over the step (fpr_sim.plant_realism). */
 enum {
     P_X, P_QUAT, P_RATE, P_ROTORS, P_ROTOR_CMD, P_CHARGE, P_TIP_VEL, P_YAW_ANCHOR, P_WIND, P_PFORCE, P_PMOMENT,
-    P_CURRENT, P_TIP_POS, P_TIP_ACC, P_CONTACT, P_GROUND_ACTIVE, P_SIZE, P_COUNT
+    P_FACTOR, P_UAV_FORCE, P_CURRENT, P_TIP_POS, P_TIP_ACC, P_CONTACT, P_GROUND_ACTIVE, P_SIZE, P_COUNT
 };
 /* controller buffer: inputs, then outputs */
 enum {
     C_QUAT, C_RATE, C_PREVIOUS, C_INTEGRAL, C_CMD_QUAT, C_THRUST, C_ARMED, C_LANDED, C_FEEDFORWARD, C_FMAX,
     C_SETPOINT, C_INTEGRAL_OUT, C_COMMANDS, C_SIZE, C_COUNT
 };
-/* quadrotor step buffer: quat, rate, rotors, charge updated in place; current output */
-enum { Q_QUAT, Q_RATE, Q_ROTORS, Q_ROTOR_CMD, Q_MOMENTS, Q_CHARGE, Q_CURRENT, Q_SIZE, Q_COUNT };
+/* quadrotor step buffer: quat, rate, rotors, charge updated in place; factors (n, 4) read when asked; current
+   output */
+enum { Q_QUAT, Q_RATE, Q_ROTORS, Q_ROTOR_CMD, Q_MOMENTS, Q_CHARGE, Q_FACTOR, Q_CURRENT, Q_SIZE, Q_COUNT };
 /* structure acceleration buffer */
 enum { A_COS, A_SIN, A_XI, A_GRAVITY, A_FORCE, A_OUT, A_SIZE, A_COUNT };
 
 static int plant_layout(int n, int *o)
 {
-    int sizes[P_COUNT - 1] = {13 + 2 * n, 4 * n, 3 * n, 4 * n, 4 * n, n, 3 * n, n, 3 * (1 + 2 * n), 3, 3, n, 3 * n,
-                              3 * n, 1, 1};
+    int sizes[P_COUNT - 1] = {13 + 2 * n, 4 * n, 3 * n, 4 * n, 4 * n, n, 3 * n, n, 3 * (1 + 2 * n), 3, 3, 4 * n,
+                              3 * n, n, 3 * n, 3 * n, 1, 1};
     int k, at = 0;
     for (k = 0; k < P_SIZE; ++k) {
         o[k] = at;
@@ -140,7 +144,7 @@ static int control_layout(int n, int *o)
 
 static int quad_layout(int n, int *o)
 {
-    int sizes[Q_COUNT - 1] = {4 * n, 3 * n, 4 * n, 4 * n, 3 * n, n, n};
+    int sizes[Q_COUNT - 1] = {4 * n, 3 * n, 4 * n, 4 * n, 3 * n, n, 4 * n, n};
     int k, at = 0;
     for (k = 0; k < Q_SIZE; ++k) {
         o[k] = at;
@@ -742,9 +746,10 @@ static void attitude_derivative(const double *y, const double *base, const doubl
 }
 
 /* QuadrotorFleet.step: (2.92) and the motor lag Ṫ = (T_cmd − T)/τ_m by classical RK4 (motor stages in closed
-   form), quaternion re-normalised, then Battery.update. quat (n,4), rate (n,3), rotors (n,4) in place. */
+   form), quaternion re-normalised, then Battery.update. quat (n,4), rate (n,3), rotors (n,4) in place. factors
+   (n,4): produced thrust k_j T_j of the rotors (QuadrotorFleet.rotor_factors), NULL: k = 1. */
 static void quad_step(const FprQuadModel *q, double *quat, double *rate, double *rotors, const double *commands,
-                      const double *moments, double *charge, double *current, double dt)
+                      const double *moments, double *charge, double *current, double dt, const double *factors)
 {
     const double arm = q->arm, kappa = q->kappa, tau = q->motor_tau;
     const double a = dt / tau;
@@ -761,12 +766,24 @@ static void quad_step(const FprQuadModel *q, double *quat, double *rate, double 
         const double t1 = t[0], t2 = t[1], t3 = t[2], t4 = t[3];
         const double e1 = cmd[0] - t1, e2 = cmd[1] - t2, e3 = cmd[2] - t3, e4 = cmd[3] - t4;
         double base[3], slope[3], y[7], ys[7], k1[7], k2[7], k3[7], k4[7], norm, gain;
-        base[0] = arm * (t2 - t4) + mo[0];
-        base[1] = arm * (t3 - t1) + mo[1];
-        base[2] = kappa * (-t1 + t2 - t3 + t4) + mo[2];
-        slope[0] = arm * (e2 - e4) / tau;
-        slope[1] = arm * (e3 - e1) / tau;
-        slope[2] = kappa * (-e1 + e2 - e3 + e4) / tau;
+        double p1 = t1, p2 = t2, p3 = t3, p4 = t4, d1 = e1, d2 = e2, d3 = e3, d4 = e4;
+        if (factors != NULL) {
+            const double *f = factors + 4 * i;
+            p1 = f[0] * t1;
+            p2 = f[1] * t2;
+            p3 = f[2] * t3;
+            p4 = f[3] * t4;
+            d1 = f[0] * e1;
+            d2 = f[1] * e2;
+            d3 = f[2] * e3;
+            d4 = f[3] * e4;
+        }
+        base[0] = arm * (p2 - p4) + mo[0];
+        base[1] = arm * (p3 - p1) + mo[1];
+        base[2] = kappa * (-p1 + p2 - p3 + p4) + mo[2];
+        slope[0] = arm * (d2 - d4) / tau;
+        slope[1] = arm * (d3 - d1) / tau;
+        slope[2] = kappa * (-d1 + d2 - d3 + d4) / tau;
         for (j = 0; j < 4; ++j)
             y[j] = quat[4 * i + j];
         for (j = 0; j < 3; ++j)
@@ -804,6 +821,8 @@ static void quad_step(const FprQuadModel *q, double *quat, double *rate, double 
    the battery alone. */
 #define FPR_FLAG_IDEAL 1
 #define FPR_FLAG_WIND 2
+#define FPR_FLAG_FACTORS 4
+#define FPR_FLAG_UAV_FORCE 8
 
 static int plant_step(const FprPlantModel *m, const double *basis, double *anchors, double *io, double dt, int flags)
 {
@@ -816,6 +835,7 @@ static int plant_step(const FprPlantModel *m, const double *basis, double *ancho
     double env_uav[3 * FPR_MAX_N], normals[FPR_MAX_N], moments[3 * FPR_MAX_N], start_quat[4 * FPR_MAX_N];
     double start_rate[3 * FPR_MAX_N];
     double h, sixth, norm, contact;
+    const double *factors;
     int i, k, status, ground_active = 0, landed = 0;
     StageInputs in;
     plant_layout(n, o);
@@ -838,14 +858,29 @@ static int plant_step(const FprPlantModel *m, const double *basis, double *ancho
         margin = 0.05 + 2.0 * vmax * dt;
         ground_active = (zmin - m->gear_height < m->ground_height + margin) || (x[2] < m->ground_height + margin);
     }
-    /* thrust vectors f_i = R_bi [0, 0, f_t] held over the step (QuadrotorFleet.thrust_vectors_list) */
+    /* thrust vectors f_i = R_bi [0, 0, f_t] held over the step (QuadrotorFleet.thrust_vectors_list), f_t the
+       produced thrust Σ k_j T_j with the realism factors; plus the held world force on each quadrotor (rotor
+       drag, Plant._advance) */
+    factors = (flags & FPR_FLAG_FACTORS) ? io + o[P_FACTOR] : NULL;
     for (i = 0; i < n; ++i) {
         const double *q = quat + 4 * i, *t = rotors + 4 * i;
         const double w = q[0], qx = q[1], qy = q[2], qz = q[3];
-        const double f = t[0] + t[1] + t[2] + t[3];
+        double f;
+        if (factors != NULL) {
+            const double *k = factors + 4 * i;
+            f = k[0] * t[0] + k[1] * t[1] + k[2] * t[2] + k[3] * t[3];
+        } else {
+            f = t[0] + t[1] + t[2] + t[3];
+        }
         thrust[3 * i] = 2.0 * (qx * qz + w * qy) * f;
         thrust[3 * i + 1] = 2.0 * (qy * qz - w * qx) * f;
         thrust[3 * i + 2] = (w * w - qx * qx - qy * qy + qz * qz) * f;
+        if (flags & FPR_FLAG_UAV_FORCE) {
+            const double *extra = io + o[P_UAV_FORCE] + 3 * i;
+            thrust[3 * i] += extra[0];
+            thrust[3 * i + 1] += extra[1];
+            thrust[3 * i + 2] += extra[2];
+        }
     }
     in.thrust = thrust;
     in.ground = ground_active;
@@ -949,7 +984,7 @@ static int plant_step(const FprPlantModel *m, const double *basis, double *ancho
         battery_update(&m->quad, rotors, dt, io + o[P_CHARGE], io + o[P_CURRENT]);
     else
         quad_step(&m->quad, quat, rate, rotors, io + o[P_ROTOR_CMD], moments, io + o[P_CHARGE],
-                  io + o[P_CURRENT], dt);
+                  io + o[P_CURRENT], dt, factors);
     return FPR_OK;
 }
 
@@ -1152,13 +1187,13 @@ FPR_EXPORT int fpr_quad_control(const FprQuadModel *q, double *io, int has_feedf
     return quad_control(q, io, has_feedforward);
 }
 
-FPR_EXPORT int fpr_quad_step(const FprQuadModel *q, double *io, double dt)
+FPR_EXPORT int fpr_quad_step(const FprQuadModel *q, double *io, double dt, int has_factors)
 {
     int o[Q_COUNT];
     if (q->n < 1 || q->n > FPR_MAX_N)
         return FPR_ERR_SIZE;
     quad_layout(q->n, o);
     quad_step(q, io + o[Q_QUAT], io + o[Q_RATE], io + o[Q_ROTORS], io + o[Q_ROTOR_CMD], io + o[Q_MOMENTS],
-              io + o[Q_CHARGE], io + o[Q_CURRENT], dt);
+              io + o[Q_CHARGE], io + o[Q_CURRENT], dt, has_factors ? io + o[Q_FACTOR] : NULL);
     return FPR_OK;
 }
