@@ -51,7 +51,7 @@ def git_commit(root: str | None = None) -> str:
 #: the scenario's realism sections (fpr_sim.scenario: each off in the ideal profile), dumped whole by realism_summary
 REALISM_SECTIONS = ("mismatch", "actuation", "aerodynamics", "motion_capture", "link")
 #: noise levels of the cameras (the rest of CameraConfig is the set-up, not realism)
-CAMERA_NOISE_FIELDS = ("emulated", "position_noise", "angle_noise", "pixel_noise", "blur_sigma")
+CAMERA_NOISE_FIELDS = ("position_noise", "angle_noise", "pixel_noise", "blur_sigma")
 
 
 def _section(value: Any) -> Any:
