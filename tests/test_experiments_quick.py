@@ -62,6 +62,8 @@ def _experiment_file(tmp_path, **changes) -> str:
     ("unknown scenario", "error: unknown scenario 'nowhere'; valid: "),
     ("bad mode", "error: mode 'bogus' is not one of centralized, "),
     ("bad node parameter", "error: period, info_timeout, max_thrust must be > 0"),
+    ("unknown realism flag", "error: --realism: unknown realism profile 'rough'; profiles: ideal, hardware"),
+    ("unknown realism key", "error: "),
 ])
 def test_a_wrong_name_file_or_parameter_is_one_clear_line_and_a_non_zero_exit(case, message, tmp_path):
     args = {"unknown name": lambda: ("run", "table_9_9"),
@@ -70,12 +72,16 @@ def test_a_wrong_name_file_or_parameter_is_one_clear_line_and_a_non_zero_exit(ca
             "unknown scenario": lambda: ("run", _experiment_file(tmp_path, scenario="nowhere")),
             "bad mode": lambda: ("run", _experiment_file(tmp_path, mode="bogus"), "--output-dir", str(tmp_path)),
             "bad node parameter": lambda: ("run", _experiment_file(tmp_path, parameters={
-                "controller": {"max_thrust": -1.0}}), "--output-dir", str(tmp_path))}[case]()
+                "controller": {"max_thrust": -1.0}}), "--output-dir", str(tmp_path)),
+            "unknown realism flag": lambda: ("run", "table_3_2", "--realism", "rough"),
+            "unknown realism key": lambda: ("run", _experiment_file(tmp_path, realism="rough"))}[case]()
     done = _cli(*args)
     assert done.returncode == 2, done.stdout[-2000:] + done.stderr[-2000:]
     lines = [line for line in done.stderr.strip().splitlines() if line and not line.startswith("[")]
     assert len(lines) == 1 and lines[0].startswith(message), done.stderr[-3000:]
     assert "Traceback" not in done.stderr + done.stdout
+    if case.startswith("unknown realism"):
+        assert lines[0].endswith("unknown realism profile 'rough'; profiles: ideal, hardware")
 
 
 def test_a_bad_option_value_is_refused_by_the_parser():

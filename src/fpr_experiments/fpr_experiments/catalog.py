@@ -27,6 +27,7 @@ Keys (all optional but ``id``, ``title``, ``scenario``, ``script``, ``duration``
     parameters: {controller: {state_source: ground_truth}}   # per executable (fpr_experiments.graph)
     uav_parameters: [{executable: controller, uav_id: 2, parameters: {...}}]
     link_outage: [10.0, 13.0]         # [s] every zeta dropped in between (info_link node)
+    realism: ideal                    # fpr_sim realism profile: ideal | hardware (default DEFAULT_REALISM)
     window: [11.0, 71.0]              # [s] metrics only inside (and inside the tracking window)
     variants:
       - {id: impedance, label: Impedance, thesis_row: Impedance, mode: impedance}
@@ -45,6 +46,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fpr_experiments.resources import EXPERIMENTS, JOY_SCRIPTS, SCENARIOS, UnknownNameError
+
+#: the realism profile of an experiment that names none (fpr_sim.scenario.realism_profiles). The goal of issue 11
+#: is "hardware" for every experiment; it stays "ideal" until the hardware profile is calibrated: switching is
+#: this one line.
+DEFAULT_REALISM = "ideal"
 
 #: every experiment must keep these (DESIGN.md §5b): no flip, no fly-away, no crash, no NaN
 DEFAULT_CHECKS: dict[str, dict[str, float]] = {
@@ -134,6 +140,7 @@ class Experiment:
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
     uav_parameters: list[UavParameters] = field(default_factory=list)
     link_outage: list[float] = field(default_factory=list)
+    realism: str = DEFAULT_REALISM  #: fpr_sim realism profile of the simulator and the inter-UAV link
     #: [s] simulated: the metrics' window is the tracking window inside [start, end] ([] = the whole flight)
     window: list[float] = field(default_factory=list)
     metrics: list[MetricColumn] = field(default_factory=list)
@@ -210,6 +217,7 @@ def experiment_from_dict(data: dict, source: str = "experiment") -> Experiment:
     ids = [v.id for v in experiment.variants]
     if len(set(ids)) != len(ids):
         raise ValueError(f"{where}: duplicate variant ids {ids}")
+    check_realism(experiment.realism, where)
     if experiment.operator not in ("joy_script", "pilot"):
         raise ValueError(f"{where}: operator must be joy_script or pilot, got '{experiment.operator}'")
     if experiment.cameras not in ("emulated", "images"):
@@ -239,6 +247,16 @@ def experiment_from_dict(data: dict, source: str = "experiment") -> Experiment:
         if not isinstance(bounds, dict) or not set(bounds) <= {"min", "max"} or not bounds:
             raise ValueError(f"{where}: check '{metric}' must be {{min: x}} and/or {{max: y}}, got {bounds!r}")
     return experiment
+
+
+def check_realism(profile: str, where: str = "realism") -> str:
+    """``profile`` if it is one of fpr_sim's realism profiles, else a one-line ValueError listing them."""
+    from fpr_sim.scenario import realism_profiles
+
+    profiles = realism_profiles()
+    if profile not in profiles:
+        raise ValueError(f"{where}: unknown realism profile {profile!r}; profiles: {', '.join(profiles)}")
+    return profile
 
 
 def load_experiment(name: str) -> Experiment:

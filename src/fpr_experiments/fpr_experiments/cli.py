@@ -26,6 +26,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=None, help="override every scenario's seed")
     parser.add_argument("--cameras", choices=("images", "emulated"), default=None,
                         help="rendered images + aruco_detector, or emulated marker poses (default: the experiment's)")
+    parser.add_argument("--realism", default=None, metavar="PROFILE",
+                        help="realism profile of the simulator and the inter-UAV link: ideal | hardware (default: "
+                             "each experiment's, catalog key 'realism')")
     parser.add_argument("--processes", action="store_true",
                         help="one process per UAV / ground station / simulator, as on the robot (default: one)")
     parser.add_argument("--real-time-factor", type=float, default=0.5,
@@ -56,6 +59,8 @@ def _command_line(args) -> str:
         parts.append(f"--seed {args.seed}")
     if args.cameras:
         parts.append(f"--cameras {args.cameras}")
+    if args.realism:
+        parts.append(f"--realism {args.realism}")
     if args.processes:
         parts.append("--processes")
     return " ".join(parts)
@@ -100,8 +105,10 @@ def run_main(argv: list[str] | None = None) -> int:
                 raise ValueError("--report-only works with 'all'")
             print(f"wrote {_write_results(names, output_root, _results_path(args), _command_line(args))}")
             return 0
-        from fpr_experiments.catalog import load_experiment
+        from fpr_experiments.catalog import check_realism, load_experiment
 
+        if args.realism is not None:
+            check_realism(args.realism, "--realism")
         for name in names:
             load_experiment(name)  # every name and file checked before anything flies
         start, status, failed = time.monotonic(), 0, []
@@ -111,7 +118,8 @@ def run_main(argv: list[str] | None = None) -> int:
                       flush=True)
             result = run_experiment(name, seed=args.seed, quick=args.quick, cameras=args.cameras,
                                     processes=args.processes, variants=args.variant, output_root=output_root,
-                                    real_time_factor=args.real_time_factor, plots=not args.no_plots)
+                                    real_time_factor=args.real_time_factor, plots=not args.no_plots,
+                                    realism=args.realism)
             if not result.passed:
                 status = 1
                 failed.append(name)

@@ -124,7 +124,12 @@ class GraphOptions:
     scenario: str = "ground_start"          #: sim: a scenario name or path (fpr_experiments / fpr_sim config)
     operator: str = "joy_script"            #: joy_script | pilot | joystick | none (an external /joy publisher)
     script: str = "takeoff_hover_land"      #: joy_script / pilot: a script name or path
-    info_link: bool = False                 #: route /fpr/info through an info_link node (communication faults)
+    #: sim: realism profile (fpr_sim.scenario.realism_profiles: ideal | hardware) of the simulator and the info
+    #: link; "": the scenario's own ``realism`` key (default ideal)
+    realism: str = ""
+    #: route /fpr/info through an info_link node (a scheduled outage); sim only. The node is also there whenever
+    #: the realism profile enables the Wi-Fi link model (scenario.link)
+    info_link: bool = False
     #: MAVLink 2 signing key file for every px4_bridge and (sim) every emulated PX4; "": unsigned
     signing_key_file: str = ""
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -144,6 +149,12 @@ class GraphOptions:
             raise ValueError(f"n must be an integer >= 3, got {self.n!r}")
         if self.backend == "real" and self.cameras == "emulated":
             raise ValueError("cameras 'emulated' needs the simulator (backend sim); the robot uses images")
+        if self.backend == "real" and (self.realism or self.info_link):
+            raise ValueError("realism and info_link need the simulator (backend sim): the robot has its own")
+        if self.realism:
+            from fpr_sim.scenario import realism_profiles
+
+            one_of("realism", self.realism, realism_profiles())
         unknown = sorted(set(self.parameters) - set(EXECUTABLES))
         unknown += sorted({kind for kind, _ in self.uav_parameters} - set(EXECUTABLES))
         unknown += sorted(set(self.params_files) - set(EXECUTABLES))
@@ -167,24 +178,33 @@ def _spec(options: GraphOptions, executable: str, namespace: str, group: str, in
                     params_files=files, parameters=parameters, remappings=list(remappings or []), uav_id=uav_id)
 
 
+#: sim with an info_link node: UAV j's controller reads the peers' ζ here (the node's ``output_topic``)
+INFO_LINK_TOPIC = "/fpr/uav{uav}/info_link"
+
+
 def describe_graph(options: GraphOptions) -> list[NodeSpec]:
     """The node list of the FPR graph for ``options`` (see the module doc), in start order: simulator, then per
-    UAV its on-board nodes, then the ground station (and the info link, if any)."""
+    UAV its on-board nodes, then the ground station (and, sim, the info link when an outage or the realism
+    profile's link model needs it: every controller then reads its own topic :data:`INFO_LINK_TOPIC`)."""
     options.validate()
     n = options.n
     specs: list[NodeSpec] = []
+    info_link: dict[str, Any] | None = None
     if options.backend == "sim":
         from fpr_sim.scenario import load_scenario
 
         scenario_file = SCENARIOS.resolve(options.scenario)
-        scenario_n = load_scenario(scenario_file).n
-        if scenario_n != n:
-            raise ValueError(f"scenario '{options.scenario}' has n = {scenario_n}, the graph n = {n}")
-        simulator = {"scenario_file": scenario_file, "emulated_cameras": options.cameras == "emulated"}
+        scenario = load_scenario(scenario_file, realism=options.realism or None)
+        if scenario.n != n:
+            raise ValueError(f"scenario '{options.scenario}' has n = {scenario.n}, the graph n = {n}")
+        simulator = {"scenario_file": scenario_file, "realism": scenario.realism,
+                     "emulated_cameras": options.cameras == "emulated"}
         if options.signing_key_file:
             simulator["signing_key_file"] = options.signing_key_file
         specs.append(_spec(options, "simulator", "", "simulator", simulator))
-    info_topic = "/fpr/info_link" if options.info_link else "/fpr/info"
+        if options.info_link or scenario.link.enabled:
+            info_link = {"n": n, "output_topic": INFO_LINK_TOPIC, "scenario_file": scenario_file,
+                         "realism": scenario.realism}
     for i in range(1, n + 1):
         ns, group = uav_namespace(i), f"uav{i}"
         bridge = {"uav_id": i}
@@ -197,8 +217,8 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
             specs.append(_spec(options, "aruco_detector", ns, group, {}, i))
         specs.append(_spec(options, "pose_estimator", ns, group, {"uav_id": i, "n": n}, i))
         controller = {"uav_id": i, "n": n, "mode": options.mode}
-        if options.info_link:
-            controller["info_input_topic"] = info_topic
+        if info_link is not None:
+            controller["info_input_topic"] = INFO_LINK_TOPIC.format(uav=i)
         specs.append(_spec(options, "controller", ns, group, controller, i))
     specs.append(_spec(options, "teleop", GROUND_NAMESPACE, "ground", {
         "n": n, "mapping_file": config_path("fpr_control", "teleop.yaml")}))
@@ -207,8 +227,8 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
             "script": JOY_SCRIPTS.resolve(options.script)}))
     elif options.operator == "joystick":
         specs.append(_spec(options, "joystick", GROUND_NAMESPACE, "ground", {}))
-    if options.info_link:
-        specs.append(_spec(options, "info_link", "/fpr", "link", {"n": n, "output_topic": info_topic}))
+    if info_link is not None:
+        specs.append(_spec(options, "info_link", "/fpr", "link", info_link))
     return specs
 
 
@@ -241,6 +261,8 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
     "scenario": ("ground_start", "sim: scenario name or path (fpr_experiments / fpr_sim config/scenarios)"),
     "operator": ("", "joy_script | joystick | none (default: joy_script in sim, joystick on the robot)"),
     "script": ("takeoff_hover_land", "joy_script: script name or path (config/joy_scripts)"),
+    "realism": ("", "sim: realism profile of the simulator and the inter-UAV link, ideal | hardware (empty: the "
+                    "scenario's own, default ideal)"),
     "signing_key_file": ("", "MAVLink 2 signing key (64 hex digits) for every px4_bridge (and, sim, every emulated "
                              "PX4); empty: unsigned"),
 }
@@ -261,6 +283,7 @@ def launch_options(values: Mapping[str, str]) -> GraphOptions:
     cameras = merged["cameras"] or ("emulated" if backend == "sim" else "images")
     operator = merged["operator"] or ("joy_script" if backend == "sim" else "joystick")
     options = GraphOptions(n=n, mode=merged["mode"], cameras=cameras, backend=backend, scenario=merged["scenario"],
-                           operator=operator, script=merged["script"], signing_key_file=merged["signing_key_file"])
+                           operator=operator, script=merged["script"], signing_key_file=merged["signing_key_file"],
+                           realism=merged["realism"])
     options.validate()
     return options

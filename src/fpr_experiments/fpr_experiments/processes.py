@@ -103,8 +103,9 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
         expected = {"/fpr/teleop": 1, "/fpr/info": n, **{f"/fpr/uav{i}/diagnostics": 1 for i in range(1, n + 1)}}
         recorder.wait_for_publishers(expected, timeout=30.0)
         simulator_spec = next(s for s in specs if s.executable == "simulator")
-        # every other node runs on simulated time (one /clock subscription each), and so does the recorder
-        clock_subscribers = len(specs) - 1 + 1
+        # every other node runs on simulated time (one /clock subscription each), and so does the recorder; the
+        # info link has a second one (it releases the zeta in flight on /clock)
+        clock_subscribers = len(specs) - 1 + 1 + sum(s.executable == "info_link" for s in specs)
         simulator_spec = replace(simulator_spec, parameters={
             **simulator_spec.parameters, "duration": float(duration), "real_time_factor": float(real_time_factor),
             "wait_for_clock_subscribers": clock_subscribers})

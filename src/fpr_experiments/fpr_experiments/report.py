@@ -6,6 +6,7 @@ variants and whether ours reproduces it), the summary table printed at the end o
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import json
 import math
@@ -47,16 +48,28 @@ def git_commit(root: str | None = None) -> str:
         return "unknown"
 
 
+#: the scenario's realism sections (fpr_sim.scenario: each off in the ideal profile), dumped whole by realism_summary
+REALISM_SECTIONS = ("mismatch", "actuation", "aerodynamics", "motion_capture", "link")
+#: noise levels of the cameras (the rest of CameraConfig is the set-up, not realism)
+CAMERA_NOISE_FIELDS = ("position_noise", "angle_noise", "pixel_noise", "blur_sigma")
+
+
+def _section(value: Any) -> Any:
+    return dataclasses.asdict(value) if dataclasses.is_dataclass(value) else value
+
+
 def realism_summary(scenario) -> dict[str, Any]:
-    """What of the simulator's realism the run had (noise levels, camera mode, model mismatch keys)."""
-    summary: dict[str, Any] = {
-        "profile": getattr(scenario, "realism", "none (fpr_sim has no realism profile yet)"),
-        "imu_gyro_noise_rad_s": scenario.sensors.gyro_noise, "imu_accel_noise_m_s2": scenario.sensors.accel_noise,
-        "camera_position_noise_m": scenario.cameras.position_noise,
-        "camera_angle_noise_rad": scenario.cameras.angle_noise, "camera_pixel_noise": scenario.cameras.pixel_noise,
+    """The realism the run had: the profile, every field of the realism sections (:data:`REALISM_SECTIONS`, as
+    the scenario resolved them: profile overlay < scenario < overrides), the IMU / sensor noise levels, the
+    cameras' noise levels and the plant parameters that differ from the controllers' model."""
+    cameras = scenario.cameras
+    return {
+        "profile": getattr(scenario, "realism", "ideal"),
+        "sections": {name: _section(getattr(scenario, name)) for name in REALISM_SECTIONS if hasattr(scenario, name)},
+        "sensors": _section(scenario.sensors),
+        "cameras": {name: getattr(cameras, name) for name in CAMERA_NOISE_FIELDS if hasattr(cameras, name)},
         "plant_overrides": sorted(scenario.plant),
     }
-    return summary
 
 
 # ------------------------------------------------------------------------------------------------ variant
@@ -165,11 +178,16 @@ def _realism_text(realism: dict | None) -> str:
     if not realism:
         return ""
     plant = ", ".join(realism.get("plant_overrides") or []) or "none"
-    return (f" Realism: {realism.get('profile')}; IMU gyro noise {realism.get('imu_gyro_noise_rad_s')} rad/s, accel "
-            f"{realism.get('imu_accel_noise_m_s2')} m/s²; emulated marker pose noise "
-            f"{realism.get('camera_position_noise_m')} m / {realism.get('camera_angle_noise_rad', 0.0):.3f} rad; "
-            f"image pixel noise {realism.get('camera_pixel_noise')}; plant parameters differing from the model: "
-            f"{plant}.")
+    sensors, cameras = realism.get("sensors") or {}, realism.get("cameras") or {}
+    enabled = [name for name, section in (realism.get("sections") or {}).items()
+               if isinstance(section, dict) and section.get("enabled")]
+    return (f" Realism: {realism.get('profile')} (effects on: {', '.join(enabled) or 'none'}); IMU gyro noise "
+            f"{sensors.get('gyro_noise', realism.get('imu_gyro_noise_rad_s'))} rad/s, accel "
+            f"{sensors.get('accel_noise', realism.get('imu_accel_noise_m_s2'))} m/s²; emulated marker pose noise "
+            f"{cameras.get('position_noise', realism.get('camera_position_noise_m'))} m / "
+            f"{cameras.get('angle_noise', realism.get('camera_angle_noise_rad')) or 0.0:.3f} rad; image pixel noise "
+            f"{cameras.get('pixel_noise', realism.get('camera_pixel_noise'))}; plant parameters differing from the "
+            f"model: {plant}.")
 
 
 def _fmt(value: float | None, digits: int) -> str:
@@ -226,8 +244,9 @@ def results_markdown(summaries: list[dict[str, Any]], experiments: dict[str, Exp
            "row (seeded); the thesis's are single hardware flights with a human in the loop, so ratios are loose "
            "indications, not pass/fail thresholds. Ratio = ours / thesis. An ordering is *reproduced* when every "
            "strict relation between two rows in the thesis's table holds in ours (thesis ties are not judged).",
-           "", "Simulator realism: fpr_sim's defaults (IMU noise and bias, emulated marker poses with 2 cm / 2° "
-           "noise or rendered images with pixel noise, battery sag, motor lag, joint offset); the plant uses the "
+           "", "Simulator realism: the profile named under each table; `ideal` is fpr_sim's defaults (IMU noise "
+           "and bias, emulated marker poses with 2 cm / 2° noise or rendered images with pixel noise, battery sag, "
+           "motor lag, joint offset); the plant uses the "
            "controllers' own Table B.1 model except where a scenario says otherwise, so tracking errors are far "
            "below the hardware's (see the realism issue).", ""]
     for summary in summaries:

@@ -8,6 +8,8 @@ Python API::
     from fpr_experiments import run_experiment
     result = run_experiment("table_3_3", seed=1, quick=False)
     result.metrics["fowo"]["force_z_rmse_n"], result.report_dir
+    # another realism profile, and scenario values laid over the experiment's (a calibration):
+    run_experiment("table_3_2", quick=True, realism="hardware", scenario_overrides={"link": {"loss": 0.05}})
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,16 +91,22 @@ def _say(text: str) -> None:
     print(text, flush=True)
 
 
-def effective_scenario(name: str, seed: int | None, path: str) -> str:
-    """Write the scenario the run uses (the named one, ``seed`` overridden) to ``path``; returns ``path``."""
+def effective_scenario(name: str, seed: int | None, path: str, realism: str | None = None,
+                       overrides: Mapping[str, Any] | None = None) -> str:
+    """Write the scenario the run uses to ``path`` and return ``path``: the named one, ``overrides`` deep-merged
+    over it (mappings key by key, anything else replaced: fpr_sim.scenario.deep_merge), ``seed`` and ``realism``
+    (the profile name, whose overlay the simulator lays under the file) set when given. Validated here."""
     import yaml
+    from fpr_sim.scenario import deep_merge, scenario_from_dict
 
     with open(SCENARIOS.resolve(name), encoding="utf-8") as stream:
         data = yaml.safe_load(stream) or {}
+    if overrides:
+        data = deep_merge(data, dict(overrides))
     if seed is not None:
         data["seed"] = int(seed)
-    from fpr_sim.scenario import scenario_from_dict
-
+    if realism:
+        data["realism"] = realism
     scenario_from_dict(data)  # validate before the graph starts
     with open(path, "w", encoding="utf-8") as stream:
         yaml.safe_dump(data, stream, sort_keys=False)
@@ -105,7 +114,8 @@ def effective_scenario(name: str, seed: int | None, path: str) -> str:
 
 
 def graph_options(experiment: Experiment, variant: Variant, scenario_file: str, cameras: str, n: int,
-                  extra: dict[str, dict[str, Any]] | None = None) -> GraphOptions:
+                  extra: dict[str, dict[str, Any]] | None = None, realism: str | None = None) -> GraphOptions:
+    """The graph of one variant; ``realism`` None: the experiment's profile."""
     resolved = experiment.resolved(variant)
     parameters = resolve_file_parameters(resolved["parameters"])
     for executable, values in (extra or {}).items():
@@ -115,7 +125,8 @@ def graph_options(experiment: Experiment, variant: Variant, scenario_file: str, 
             {"outage_start": float(experiment.link_outage[0]), "outage_end": float(experiment.link_outage[1])})
     return GraphOptions(n=n, mode=resolved["mode"], cameras=cameras, backend="sim", scenario=scenario_file,
                         operator=experiment.operator, script=resolved["script"],
-                        info_link=bool(experiment.link_outage), parameters=parameters,
+                        realism=realism or experiment.realism, info_link=bool(experiment.link_outage),
+                        parameters=parameters,
                         uav_parameters=resolved["uav_parameters"])
 
 
@@ -165,8 +176,10 @@ def _check(metrics: dict[str, float], experiment: Experiment) -> list[CheckResul
 
 def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, seed: int | None = None,
                 quick: bool = False, cameras: str | None = None, processes: bool = False,
-                real_time_factor: float = 0.5, plots: bool = True, log: bool = True) -> VariantResult:
-    """Fly one variant and write its report folder (see the module doc)."""
+                real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
+                scenario_overrides: Mapping[str, Any] | None = None) -> VariantResult:
+    """Fly one variant and write its report folder (see the module doc); ``realism`` None: the experiment's
+    profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`)."""
     from fpr_experiments import report
     from fpr_experiments.metrics import compute_metrics
     from fpr_experiments.recording import flight_record, recorded_topics, write_mcap
@@ -175,19 +188,22 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     duration = resolved["quick_duration"] if quick else resolved["duration"]
     cameras = cameras or experiment.cameras
     os.makedirs(output_dir, exist_ok=True)
-    scenario_file = effective_scenario(resolved["scenario"], seed, os.path.join(output_dir, "scenario.yaml"))
+    realism = realism or experiment.realism
+    scenario_file = effective_scenario(resolved["scenario"], seed, os.path.join(output_dir, "scenario.yaml"),
+                                       realism, scenario_overrides)
     from fpr_sim.scenario import load_scenario
 
     scenario = load_scenario(scenario_file)
     n = scenario.n
-    options = graph_options(experiment, variant, scenario_file, cameras, n)
+    options = graph_options(experiment, variant, scenario_file, cameras, n, realism=realism)
     specs = describe_graph(options)
     write_graph_file(specs, os.path.join(output_dir, "graph.json"))
     topics = recorded_topics(n, pilot=experiment.operator == "pilot", target=scenario_has_target(scenario))
     label = f"{experiment.id}/{variant.id}"
     if log:
         _say(f"[{label}] scenario {os.path.basename(resolved['scenario'])}, script {resolved['script']}, "
-             f"mode {resolved['mode']}, {cameras} cameras, seed {scenario.seed}, {duration:.0f} s simulated"
+             f"mode {resolved['mode']}, {cameras} cameras, realism {scenario.realism}"
+             f"{' + overrides' if scenario_overrides else ''}, seed {scenario.seed}, {duration:.0f} s simulated"
              f"{' (quick)' if quick else ''}, {'processes' if processes else 'one process'} -> {output_dir}")
     wall_start = time.monotonic()
     if processes:
@@ -219,7 +235,8 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     checks = _check(metrics, experiment)
     mcap = write_mcap(recording, os.path.join(output_dir, "flight.mcap"), metadata={
         "experiment": experiment.id, "variant": variant.id, "scenario": resolved["scenario"],
-        "script": resolved["script"], "mode": resolved["mode"], "cameras": cameras, "seed": str(scenario.seed)})
+        "script": resolved["script"], "mode": resolved["mode"], "cameras": cameras, "seed": str(scenario.seed),
+        "realism": scenario.realism})
     result = VariantResult(variant.id, metrics, checks, output_dir, record.sim_time, flight_wall, lockstep_timeouts,
                            completed, errors, record if plots else None)
     report.write_variant_json(result, record, os.path.join(output_dir, "metrics.json"), scenario)
@@ -269,11 +286,20 @@ def _run_in_process(specs, topics, duration: float, label: str, log: bool):
 
 def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, cameras: str | None = None,
                    processes: bool = False, variants: list[str] | None = None, output_root: str | None = None,
-                   real_time_factor: float = 0.5, plots: bool = True, log: bool = True) -> ExperimentResult:
-    """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``."""
+                   real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
+                   scenario_overrides: Mapping[str, Any] | None = None) -> ExperimentResult:
+    """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``.
+
+    ``realism``: a realism profile (fpr_sim.scenario.realism_profiles) instead of the experiment's (catalog key
+    ``realism``, default :data:`fpr_experiments.catalog.DEFAULT_REALISM`). ``scenario_overrides``: a mapping
+    deep-merged over every variant's scenario, e.g. ``{"actuation": {"thrust_noise": 0.02}}``; the merged
+    scenario is each variant's ``scenario.yaml``, the file the simulator and the info link read."""
     from fpr_experiments import report
+    from fpr_experiments.catalog import check_realism
 
     experiment = load_experiment(name)
+    if realism is not None:
+        check_realism(realism)
     chosen = [experiment.variant(v) for v in variants] if variants else experiment.variants
     root = os.path.join(output_root or default_output_root(), experiment.id)
     os.makedirs(root, exist_ok=True)
@@ -281,7 +307,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
     for variant in chosen:
         results[variant.id] = run_variant(
             experiment, variant, os.path.join(root, variant.id), seed=seed, quick=quick, cameras=cameras,
-            processes=processes, real_time_factor=real_time_factor, plots=plots, log=log)
+            processes=processes, real_time_factor=real_time_factor, plots=plots, log=log, realism=realism,
+            scenario_overrides=scenario_overrides)
     result = ExperimentResult(experiment.id, results, root)
     result.summary = report.write_experiment_report(experiment, result, root, quick=quick, seed=seed,
                                                     processes=processes, plots=plots)

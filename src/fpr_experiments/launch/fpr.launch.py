@@ -3,6 +3,7 @@
 
     ros2 launch fpr_experiments fpr.launch.py backend:=sim n:=3 mode:=communicating
     ros2 launch fpr_experiments fpr.launch.py backend:=sim scenario:=hover script:=integration_hover
+    ros2 launch fpr_experiments fpr.launch.py backend:=sim realism:=hardware   # + the Wi-Fi link (info_link node)
     ros2 launch fpr_experiments fpr.launch.py backend:=real mode:=communicating   # on the robot (see README)
 
 One process per node. With backend:=sim the launch keeps DDS discovery on this host

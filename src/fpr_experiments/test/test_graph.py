@@ -74,7 +74,33 @@ def test_graph_file_round_trip(tmp_path):
     write_graph_file(specs, str(tmp_path / "graph.json"))
     assert read_graph_file(str(tmp_path / "graph.json")) == specs
     assert any(s.executable == "info_link" for s in specs)
-    assert all(s.parameters["info_input_topic"] == "/fpr/info_link" for s in specs if s.executable == "controller")
+    assert [s.parameters["info_input_topic"] for s in specs if s.executable == "controller"] == [
+        "/fpr/uav1/info_link", "/fpr/uav2/info_link", "/fpr/uav3/info_link"]
+
+
+def test_realism_reaches_the_simulator_and_the_info_link():
+    ideal = describe_graph(GraphOptions())  # the scenario's own profile: ideal, no link model, no outage
+    assert ideal[0].parameters["realism"] == "ideal"
+    assert not any(s.executable == "info_link" for s in ideal)
+    assert all("info_input_topic" not in s.parameters for s in ideal if s.executable == "controller")
+    hardware = describe_graph(GraphOptions(realism="hardware"))  # its link model needs the info_link node
+    link = next(s for s in hardware if s.executable == "info_link")
+    assert hardware[0].parameters["realism"] == link.parameters["realism"] == "hardware"
+    assert link.parameters["scenario_file"] == hardware[0].parameters["scenario_file"]
+    assert link.parameters["output_topic"] == "/fpr/uav{uav}/info_link" and link.group == "link"
+    assert [s.parameters["info_input_topic"] for s in hardware if s.executable == "controller"] == [
+        "/fpr/uav1/info_link", "/fpr/uav2/info_link", "/fpr/uav3/info_link"]
+    outage = describe_graph(GraphOptions(realism="ideal", info_link=True))  # an outage alone needs it too
+    assert next(s for s in outage if s.executable == "info_link").parameters["realism"] == "ideal"
+
+
+def test_realism_is_validated_and_the_robot_has_none():
+    with pytest.raises(ValueError, match="realism 'rough' is not one of ideal, hardware"):
+        describe_graph(GraphOptions(realism="rough"))
+    for options in (GraphOptions(backend="real", cameras="images", realism="hardware"),
+                    GraphOptions(backend="real", cameras="images", info_link=True)):
+        with pytest.raises(ValueError, match="need the simulator"):
+            describe_graph(options)
 
 
 def test_names_resolve_with_or_without_yaml_and_unknown_ones_list_the_valid():

@@ -67,6 +67,8 @@ def _launch(module, **arguments: str):
     {"backend": "sim", "n": "3", "mode": "communicating"},
     {"backend": "sim", "mode": "impedance", "cameras": "images", "scenario": "hover", "script": "integration_hover"},
     {"backend": "real", "mode": "non_communicating"},
+    {"backend": "sim", "realism": "hardware"},
+    {"backend": "sim", "realism": "ideal", "scenario": "hover", "script": "integration_hover"},
 ])
 def test_launch_file_builds_the_descriptions_node_list(launch_module, arguments):
     declared, actions = _launch(launch_module, **arguments)
@@ -80,6 +82,10 @@ def test_launch_file_builds_the_descriptions_node_list(launch_module, arguments)
         assert (kwargs["namespace"] or "") == spec.namespace
         assert kwargs["parameters"] == [*spec.params_files, spec.parameters]
         assert kwargs["remappings"] == [tuple(r) for r in spec.remappings]
+    if arguments.get("realism"):
+        realism = [n.kwargs["parameters"][-1]["realism"] for n in nodes if n.kwargs["executable"] in (
+            "simulator", "info_link")]
+        assert realism == [arguments["realism"]] * (2 if arguments["realism"] == "hardware" else 1)
     environment = [a for a in actions if type(a).__name__ == "SetEnvironmentVariable"]
     if arguments.get("backend", "sim") == "sim":
         assert [a.args for a in environment] == [("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")]
@@ -96,3 +102,5 @@ def test_a_bad_launch_argument_is_one_clear_error(launch_module):
         _launch(launch_module, mode="bogus")
     with pytest.raises(ValueError, match="n must be an integer"):
         _launch(launch_module, n="three")
+    with pytest.raises(ValueError, match="realism 'rough' is not one of ideal, hardware"):
+        _launch(launch_module, realism="rough")

@@ -503,10 +503,45 @@ class MotionCaptureConfig:
 
 @dataclass
 class LinkConfig:
-    """Realism: the inter-UAV link (information vectors ζ_i) as a Wi-Fi link: latency, loss, bursts. Ideal: the
-    DDS topic as it is."""
+    """Realism: the inter-UAV link (information vectors ζ_i) as a Wi-Fi link, applied by fpr_experiments'
+    ``info_link`` node (model: :mod:`fpr_experiments.link`; values and sources: src/fpr_experiments/README.md).
+    Ideal (``enabled: false``): the DDS topic as it is.
+
+    Every ζ_i is delivered to each receiver j ≠ i independently (one channel per directed pair, seeded from the
+    scenario seed), in simulation time:
+
+    - latency ``latency_min`` + a lognormal jitter of mean ``latency_mean`` and standard deviation
+      ``latency_std`` [s] (``latency_std`` 0: the jitter is exactly ``latency_mean``); order preserved per pair
+      (FIFO: a ζ is never delivered before one its sender sent earlier to the same receiver);
+    - loss: a Gilbert–Elliott two-state channel per pair, its state a continuous-time Markov chain (mean time
+      ``burst_interval`` in the good state, ``burst_duration`` in a burst, both [s]); a ζ is lost with
+      probability ``loss`` in the good state and ``burst_loss`` in a burst.
+    """
 
     enabled: bool = False
+    latency_min: float = 0.0  #: [s] fixed part (radio, MAC, DDS and both stacks at their fastest)
+    latency_mean: float = 0.0  #: [s] mean of the lognormal jitter above ``latency_min``
+    latency_std: float = 0.0  #: [s] standard deviation of the jitter
+    loss: float = 0.0  #: [-] i.i.d. loss probability in the good state
+    burst_interval: float = math.inf  #: [s] mean time in the good state between bursts (inf: no bursts)
+    burst_duration: float = 0.0  #: [s] mean duration of a burst (the bad state)
+    burst_loss: float = 1.0  #: [-] loss probability during a burst
+
+    def __post_init__(self) -> None:
+        for name in ("latency_min", "latency_mean", "latency_std", "burst_duration"):
+            value = getattr(self, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                raise ValueError(f"link.{name}: must be finite and >= 0 [s], got {value}")
+        for name in ("loss", "burst_loss"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"link.{name}: a probability in [0, 1], got {value}")
+        if not self.burst_interval > 0.0:
+            raise ValueError(f"link.burst_interval: must be > 0 [s] (inf: no bursts), got {self.burst_interval}")
+        if self.latency_std > 0.0 and self.latency_mean <= 0.0:
+            raise ValueError("link.latency_std > 0 needs latency_mean > 0 (a lognormal jitter has a positive mean)")
+        if math.isfinite(self.burst_interval) and self.burst_duration <= 0.0:
+            raise ValueError("link.burst_duration: must be > 0 [s] when bursts occur (finite burst_interval)")
 
 
 @dataclass

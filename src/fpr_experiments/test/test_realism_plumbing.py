@@ -1,0 +1,76 @@
+"""Realism through the experiments (ROS-free): the catalog key ``realism`` and the CLI's ``--realism`` (an unknown
+profile is one line listing the profiles, exit 2), the effective scenario of a run (profile and
+``scenario_overrides`` deep-merged, written to the report folder) and the report's realism summary."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+from fpr_experiments.catalog import DEFAULT_REALISM, experiment_from_dict, load_all
+from fpr_experiments.cli import run_main
+from fpr_experiments.report import REALISM_SECTIONS, _realism_text, realism_summary
+from fpr_experiments.runner import effective_scenario, graph_options
+from fpr_sim.scenario import load_scenario, realism_profiles
+
+BASE = {"id": "x", "title": "t", "scenario": "ground_start", "script": "integration_flight", "duration": 10.0,
+        "variants": [{"id": "a"}], "metrics": [{"metric": "roll_rmse_deg"}]}
+PROFILES_LINE = "unknown realism profile 'rough'; profiles: ideal, hardware"
+
+
+def test_experiments_default_to_the_catalog_default_profile():
+    assert DEFAULT_REALISM in realism_profiles()
+    assert experiment_from_dict(dict(BASE)).realism == DEFAULT_REALISM
+    assert experiment_from_dict({**BASE, "realism": "hardware"}).realism == "hardware"
+    assert all(e.realism in realism_profiles() for e in load_all())
+
+
+def test_an_unknown_profile_in_an_experiment_is_one_line_listing_the_profiles(tmp_path, capsys):
+    with pytest.raises(ValueError, match=PROFILES_LINE):
+        experiment_from_dict({**BASE, "realism": "rough"})
+    path = tmp_path / "x.yaml"
+    path.write_text(yaml.safe_dump({**BASE, "realism": "rough"}))
+    assert run_main([str(path), "--output-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert PROFILES_LINE in err and len(err.splitlines()) == 1
+
+
+def test_cli_realism_flag_is_checked_before_anything_flies(tmp_path, capsys):
+    assert run_main(["table_3_2", "--realism", "rough", "--output-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: --realism: {PROFILES_LINE}"
+    assert list(tmp_path.iterdir()) == []  # nothing flown, nothing written
+
+
+def test_effective_scenario_deep_merges_the_overrides_and_names_the_profile(tmp_path):
+    path = effective_scenario("hover", 5, str(tmp_path / "scenario.yaml"), "hardware",
+                              {"link": {"loss": 0.2}, "sensors": {"gyro_noise": 0.01}})
+    data = yaml.safe_load(open(path, encoding="utf-8"))
+    assert data["seed"] == 5 and data["realism"] == "hardware" and data["link"] == {"loss": 0.2}
+    scenario = load_scenario(path)
+    assert scenario.realism == "hardware" and scenario.sensors.gyro_noise == 0.01
+    hardware = load_scenario("hover", realism="hardware")
+    # the override wins, the rest of the profile's link stays
+    assert scenario.link.loss == 0.2 and scenario.link.enabled and scenario.link.latency_min == \
+        hardware.link.latency_min
+    assert scenario.initial_state == hardware.initial_state  # the named scenario's own values are kept
+    with pytest.raises(ValueError, match="unknown key"):
+        effective_scenario("hover", None, str(tmp_path / "bad.yaml"), None, {"link": {"los": 0.2}})
+
+
+def test_graph_options_take_the_experiments_profile_or_the_callers():
+    experiment = experiment_from_dict({**BASE, "realism": "hardware"})
+    variant = experiment.variants[0]
+    assert graph_options(experiment, variant, "ground_start", "emulated", 3).realism == "hardware"
+    assert graph_options(experiment, variant, "ground_start", "emulated", 3, realism="ideal").realism == "ideal"
+
+
+def test_realism_summary_states_the_profile_and_every_realism_section():
+    summary = realism_summary(load_scenario("hover", realism="hardware"))
+    assert summary["profile"] == "hardware"
+    assert set(summary["sections"]) == set(REALISM_SECTIONS)
+    assert summary["sections"]["link"]["enabled"] is True and "latency_min" in summary["sections"]["link"]
+    assert "gyro_noise" in summary["sensors"] and "position_noise" in summary["cameras"]
+    ideal = realism_summary(load_scenario("hover"))
+    assert ideal["profile"] == "ideal" and not any(s["enabled"] for s in ideal["sections"].values())
+    assert "hardware (effects on: link" in _realism_text(summary)
+    assert "ideal (effects on: none)" in _realism_text(ideal)
