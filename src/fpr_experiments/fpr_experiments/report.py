@@ -69,7 +69,19 @@ def realism_summary(scenario) -> dict[str, Any]:
         "sensors": _section(scenario.sensors),
         "cameras": {name: getattr(cameras, name) for name in CAMERA_NOISE_FIELDS if hasattr(cameras, name)},
         "plant_overrides": sorted(scenario.plant),
+        "plant_draws": _plant_draws(scenario),
     }
+
+
+def _plant_draws(scenario) -> dict[str, Any]:
+    """What the realism drew for this run's plant (fpr_sim.plant_realism: the true parameters off Table B.1, the
+    true thrust curves, rotor gains, ...); empty when no plant effect is on."""
+    if not any(getattr(getattr(scenario, name, None), "enabled", False) for name in ("mismatch", "actuation",
+                                                                                      "aerodynamics")):
+        return {}
+    from fpr_sim.plant_realism import PlantRealism
+
+    return PlantRealism(scenario, dt=0.001).report()
 
 
 # ------------------------------------------------------------------------------------------------ variant

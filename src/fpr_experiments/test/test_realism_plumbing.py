@@ -72,5 +72,13 @@ def test_realism_summary_states_the_profile_and_every_realism_section():
     assert "gyro_noise" in summary["sensors"] and "position_noise" in summary["cameras"]
     ideal = realism_summary(load_scenario("hover"))
     assert ideal["profile"] == "ideal" and not any(s["enabled"] for s in ideal["sections"].values())
-    assert "hardware (effects on: link" in _realism_text(summary)
+    assert "hardware (effects on: " in _realism_text(summary) and "link)" in _realism_text(summary)
     assert "ideal (effects on: none)" in _realism_text(ideal)
+
+
+def test_realism_summary_states_the_plant_draws():
+    """The report says what the hardware profile drew for the run's plant (true masses, thrust curves, ...)."""
+    hardware = realism_summary(load_scenario("hover", realism="hardware"))
+    draws = hardware["plant_draws"]
+    assert draws["mismatch"] and len(draws["thrust_coefficients"]) == 3
+    assert realism_summary(load_scenario("hover"))["plant_draws"] == {}
