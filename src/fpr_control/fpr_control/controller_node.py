@@ -57,7 +57,11 @@ class ControllerNode(Node):
             "centralized | communicating | non_communicating | impedance | pd | pd_compensated")).value
         observer = d("observer", "fowo", describe("wrench observer: fowo | sowo | smwo")).value
         state_source = d("state_source", "local", describe(
-            "local (LocalState + peers' zeta) or ground_truth (/fpr/ground_truth, F0; implied by centralized)")).value
+            "local (LocalState + peers' zeta) or ground_truth (motion capture on motion_capture_topic, F0; implied by "
+            "centralized)")).value
+        motion_capture_topic = d("motion_capture_topic", "/fpr/motion_capture", describe(
+            "fpr_msgs/FprState the ground-truth modes fly on: the simulator's (or a MOCAP bridge's) motion capture; "
+            "/fpr/ground_truth is the simulator's exact truth")).value
         rate = d("rate", 50.0, describe("control rate [Hz]")).value
         info_timeout = d("info_timeout", 0.2, describe("[s] a peer's zeta older than this -> fallback to NC")).value
         max_thrust = d("max_thrust", 25.0, describe("f_max [N]: thrust saturation")).value
@@ -152,7 +156,7 @@ class ControllerNode(Node):
         self.create_subscription(TeleopCommand, "/fpr/teleop", self._on_teleop, best_effort)
         self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)
         if self.controller.uses_ground_truth:
-            self.create_subscription(FprState, "/fpr/ground_truth", self._on_ground_truth, best_effort)
+            self.create_subscription(FprState, motion_capture_topic, self._on_ground_truth, best_effort)
         self.setpoint_pub = self.create_publisher(AttitudeThrustSetpoint, "setpoint", best_effort)
         self.info_pub = self.create_publisher(InformationVector, "/fpr/info", best_effort)
         self.wrench_pub = self.create_publisher(WrenchEstimate, "wrench", best_effort)

@@ -167,7 +167,7 @@ def test_controller_node_reports_the_centralized_desired_state():
         helper = graph.helper
         statuses = []
         helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
-        truth_pub = helper.create_publisher(FprState, "/fpr/ground_truth", BEST_EFFORT)
+        truth_pub = helper.create_publisher(FprState, "/fpr/motion_capture", BEST_EFFORT)
         teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
         truth = FprState()

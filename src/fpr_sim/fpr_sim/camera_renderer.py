@@ -10,6 +10,11 @@ projected marker is warped, so a frame costs about a millisecond. The marker is 
 corners is behind (or within ``near_clip`` of) the camera, or when its bounding box misses the image.
 
 Options: Gaussian blur (σ in px) before Gaussian pixel noise (σ in grey levels); deterministic for a seed.
+Per-frame realism effects (:class:`FrameEffects`, drawn by :mod:`fpr_sim.cameras`), applied in the order light
+meets them: an occluding band over the marker (a leg or its shadow), motion blur along the image motion during
+the exposure (a line kernel on the marker's region only), the optical blur, then the photometric gain, offset and
+lighting gradient together with the sensor noise in one float32 pass. Without effects the image is bit-identical
+to the effect-free renderer.
 
 :func:`emulate_relative_pose` gives the MOCAP-emulated relative pose of thesis §4.4.1: the true ``p_T_b`` with
 Gaussian noise (default 2 cm and 2° per axis).
@@ -24,7 +29,45 @@ import numpy as np
 from fpr_model.calibration import CameraModel, aruco_dictionary, invert_transform, make_transform
 from fpr_model.rotations import quat_from_rotvec, quat_to_rotmat
 
-__all__ = ["MarkerRenderer", "RenderResult", "emulate_relative_pose"]
+__all__ = ["FrameEffects", "MarkerRenderer", "RenderResult", "emulate_relative_pose", "motion_blur_kernel"]
+
+
+@dataclass
+class FrameEffects:
+    """Realism effects of one frame (image coordinates in px, grey levels 0-255).
+
+    occluder: (4, 2) polygon [px] whose pixels are multiplied by ``occluder_factor`` (None: no occlusion).
+    motion: (2,) image displacement of the marker during the exposure [px] (None or < 0.5 px: no motion blur).
+    gain, offset: photometric I' = gain·I + offset [-, grey levels]. gradient: (2,) lighting gradient (a, b)
+    [grey levels] across the image: + a·x̂ + b·ŷ, x̂ = (u − W/2)/W, ŷ = (v − H/2)/H.
+    """
+
+    occluder: np.ndarray | None = None
+    occluder_factor: float = 1.0
+    motion: np.ndarray | None = None
+    gain: float = 1.0
+    offset: float = 0.0
+    gradient: np.ndarray | None = None
+
+    @property
+    def photometric(self) -> bool:
+        return self.gain != 1.0 or self.offset != 0.0 or (self.gradient is not None and bool(np.any(self.gradient)))
+
+
+def motion_blur_kernel(motion: np.ndarray) -> np.ndarray:
+    """Normalised line kernel (float32, odd square side) of a linear image motion ``motion`` (2,) [px]: the box
+    average of the exposure's positions, drawn anti-aliased with cv2.line on a 4× grid and area-reduced."""
+    length = float(np.hypot(*motion))
+    side = 2 * int(np.ceil(0.5 * length)) + 1
+    s = 4
+    fine = np.zeros((side * s, side * s), dtype=np.float32)
+    centre = np.array([side * s / 2.0 - 0.5] * 2)
+    a, b = centre - 0.5 * s * np.asarray(motion), centre + 0.5 * s * np.asarray(motion)
+    shift = 4
+    cv2.line(fine, tuple(int(round(v * (1 << shift))) for v in a), tuple(int(round(v * (1 << shift))) for v in b),
+             1.0, thickness=s, lineType=cv2.LINE_AA, shift=shift)
+    kernel = cv2.resize(fine, (side, side), interpolation=cv2.INTER_AREA)
+    return kernel / max(float(kernel.sum()), 1e-12)
 
 @dataclass
 class RenderResult:
@@ -95,13 +138,13 @@ class MarkerRenderer:
         return uvw[:, :2] / uvw[:, 2:3]
 
     def render(self, camera_T_marker, blur_sigma: float = 0.0, noise_sigma: float = 0.0,
-               rng: np.random.Generator | None = None) -> RenderResult:
+               rng: np.random.Generator | None = None, effects: FrameEffects | None = None) -> RenderResult:
         """Render the frame for the marker pose ``C_T_M`` (4×4, metres).
 
         blur_sigma [px] and noise_sigma [grey levels] add optical blur and sensor noise. The noise is a window,
         at an offset drawn from ``rng``, of a fixed bank of Gaussian samples (2×2 frames, seeded by
         ``noise_seed``): the same seeds give the same images (a default_rng(0) is used when noise is requested
-        without an ``rng``).
+        without an ``rng``). ``effects`` (:class:`FrameEffects`): occlusion, motion blur, photometric changes.
         """
         T = np.asarray(camera_T_marker, dtype=float)
         width, height = self.camera.width, self.camera.height
@@ -118,14 +161,55 @@ class MarkerRenderer:
                                   & (corners[:, 1] >= 1.0) & (corners[:, 1] <= height - 2.0)))
             outer_px = self._project(outer_c)
             drawn = self._draw(image, outer_px, R, t)
+            if drawn and effects is not None:
+                self._occlude_and_smear(image, outer_px, effects)
         if blur_sigma > 0.0:
             image = cv2.GaussianBlur(image, (0, 0), float(blur_sigma))
-        if noise_sigma > 0.0:
-            rng = rng if rng is not None else np.random.default_rng(0)
+        photometric = effects is not None and effects.photometric
+        if noise_sigma > 0.0 or photometric:
             noisy = image.astype(np.float32)
-            noisy += np.float32(noise_sigma) * self._noise_patch(rng)
+            if photometric:
+                self._apply_photometric(noisy, effects)
+            if noise_sigma > 0.0:
+                rng = rng if rng is not None else np.random.default_rng(0)
+                noisy += np.float32(noise_sigma) * self._noise_patch(rng)
             image = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
         return RenderResult(image, drawn, in_view, corners)
+
+    def _occlude_and_smear(self, image: np.ndarray, outer_px: np.ndarray, effects: FrameEffects) -> None:
+        """In place: the occluding band (pixels × factor), then the motion blur on the marker's padded region."""
+        height, width = image.shape
+        if effects.occluder is not None:
+            mask = np.zeros_like(image)
+            cv2.fillConvexPoly(mask, np.round(np.asarray(effects.occluder) * 16).astype(np.int32), 1,
+                               lineType=cv2.LINE_8, shift=4)
+            covered = mask.astype(bool)
+            image[covered] = np.rint(image[covered] * float(effects.occluder_factor)).astype(np.uint8)
+        motion = effects.motion
+        if motion is None or float(np.hypot(*motion)) < 0.5:
+            return
+        kernel = motion_blur_kernel(np.asarray(motion, dtype=float))
+        pad = kernel.shape[0]
+        x0 = max(int(np.floor(outer_px[:, 0].min())) - pad, 0)
+        y0 = max(int(np.floor(outer_px[:, 1].min())) - pad, 0)
+        x1 = min(int(np.ceil(outer_px[:, 0].max())) + pad + 1, width)
+        y1 = min(int(np.ceil(outer_px[:, 1].max())) + pad + 1, height)
+        if x1 > x0 and y1 > y0:
+            roi = image[y0:y1, x0:x1]
+            roi[...] = cv2.filter2D(roi, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+
+    def _apply_photometric(self, pixels: np.ndarray, effects: FrameEffects) -> None:
+        """In place on float32 grey levels: ``gain·I + offset + a·x̂ + b·ŷ`` (see :class:`FrameEffects`)."""
+        if effects.gain != 1.0:
+            pixels *= np.float32(effects.gain)
+        if effects.offset != 0.0:
+            pixels += np.float32(effects.offset)
+        if effects.gradient is not None and np.any(effects.gradient):
+            height, width = pixels.shape
+            xs = (np.arange(width, dtype=np.float32) - 0.5 * width) / width
+            ys = (np.arange(height, dtype=np.float32) - 0.5 * height) / height
+            a, b = (np.float32(v) for v in effects.gradient)
+            pixels += np.add.outer(b * ys, a * xs)
 
     def _noise_patch(self, rng: np.random.Generator) -> np.ndarray:
         """A (height, width) window of unit Gaussian noise at a random offset (drawn from ``rng``) into a fixed

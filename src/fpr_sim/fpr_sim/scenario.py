@@ -169,20 +169,52 @@ class Px4Config:
 
 @dataclass
 class SensorConfig:
-    """IMU noise (white, per sample) and constant gyro bias, per UAV (deterministic with the seed)."""
+    """What each PX4 reports (fpr_sim.sensors): IMU white noise per sample, a per-UAV turn-on bias of the gyro and
+    the accelerometer (a constant draw) that then wanders as a random walk advanced in simulation time
+    (b(t_k) = b(t_{k−1}) + σ_rw √(t_k − t_{k−1}) ξ, ξ ~ N(0, I), the exact discretisation of the Wiener process of
+    PX4 EKF2's bias model), and noise on the reported attitude, position, velocity and voltage. Deterministic with
+    the seed; every bias effect off (0) in the ideal profile but the historical constant gyro bias."""
 
-    gyro_noise: float = 0.003  #: [rad/s] 1σ
-    accel_noise: float = 0.05  #: [m/s²] 1σ
+    gyro_noise: float = 0.003  #: [rad/s] 1σ per sample
+    accel_noise: float = 0.05  #: [m/s²] 1σ per sample
     gyro_bias: float = 0.005  #: [rad/s] 1σ of the per-UAV constant bias draw
     attitude_noise: float = 0.002  #: [rad] 1σ on the reported attitude
     velocity_noise: float = 0.02  #: [m/s] 1σ on LOCAL_POSITION_NED velocity
     position_noise: float = 0.02  #: [m] 1σ on LOCAL_POSITION_NED position
     voltage_noise: float = 0.01  #: [V] 1σ
+    accel_bias: float = 0.0  #: [m/s²] 1σ per axis of the per-UAV turn-on accelerometer bias draw (0: none)
+    gyro_bias_random_walk: float = 0.0  #: [rad/s/√s] gyro bias random-walk density (PX4 EKF2_GYR_B_NOISE)
+    accel_bias_random_walk: float = 0.0  #: [m/s²/√s] accelerometer bias random-walk density (EKF2_ACC_B_NOISE)
 
 
 @dataclass
 class CameraConfig:
-    """Onboard cameras (thesis Appendix D) and the emulated-detection option."""
+    """Onboard cameras (thesis §4.2.1, Appendix D) and the emulated-detection option (thesis §4.4.1).
+
+    Realism effects (fpr_sim.cameras, fpr_sim.camera_renderer), each off with its default (0, or 1 for
+    ``detection_probability``), each drawn from its own seeded stream so that switching one on changes no other:
+
+    - ``latency``: a frame (or emulated detection) is stamped at its exposure instant t_k, rendered from the state at
+      t_k, and published at the first /clock tick at or after t_k + latency (exact when latency is a multiple of the
+      /clock period, 4 ms by default). Both camera modes.
+    - ``exposure_time``: motion blur (rendered): the marker's image is smeared along the mean displacement of its
+      projected corners between t_k − T_e/2 and t_k + T_e/2 (relative motion of camera and marker from the true
+      twists of the UAV and the platform, first order).
+    - ``contrast_variation``, ``brightness_variation``, ``lighting_gradient``: per-frame photometric changes
+      (rendered): I' = g·I + o + a·x̂ + b·ŷ with g ~ N(1, σ_c²), o ~ N(0, σ_o²), (a, b) ~ N(0, σ_l² I), x̂, ŷ the
+      pixel coordinates normalised to [−½, ½] (auto-exposure steps, lamps, the platform's shadow).
+    - ``occlusion_probability``: with this probability per frame a band ``occlusion_width`` marker sides wide (a leg,
+      a cable or their shadow) crosses the marker at a random angle and offset, multiplying what it covers by a
+      factor uniform in [0, ``occlusion_shade``] (rendered).
+    - calibration error: each UAV's TRUE camera differs from the calibration the estimator is configured with
+      (Table D.1 b_T_C, the CameraModel intrinsics published on camera_info): focal lengths scaled by
+      1 + U(−tol, tol) (``intrinsics_tolerance``), principal point shifted by U(−tol, tol) px
+      (``principal_point_tolerance``), the three ZXZ angles of b_T_C by U(−tol, tol) rad
+      (``mounting_angle_tolerance``) and its translation by U(−tol, tol) m per axis
+      (``mounting_translation_tolerance``). The renderer and the emulator use the true camera; camera_info and the
+      estimator keep the nominal one. Both camera modes.
+    - ``detection_probability``: emulated detections only: each is delivered with this probability (misses).
+    """
 
     enabled: bool = True
     rate: float = 20.0  #: [Hz]
@@ -191,6 +223,19 @@ class CameraConfig:
     angle_noise: float = math.radians(2.0)  #: emulated pose noise [rad] per axis
     pixel_noise: float = 2.0  #: image noise 1σ [grey levels]
     blur_sigma: float = 0.0  #: Gaussian blur [px], 0 = none
+    latency: float = 0.0  #: [s] exposure instant (the stamp) to publication
+    exposure_time: float = 0.0  #: [s] motion blur over the exposure (rendered); 0 = none
+    contrast_variation: float = 0.0  #: 1σ of the per-frame gain g − 1 [-] (rendered)
+    brightness_variation: float = 0.0  #: 1σ of the per-frame offset [grey levels] (rendered)
+    lighting_gradient: float = 0.0  #: 1σ of each gradient coefficient across the image [grey levels] (rendered)
+    occlusion_probability: float = 0.0  #: per-frame probability of a band over the marker (rendered)
+    occlusion_width: float = 0.25  #: band width [marker sides]
+    occlusion_shade: float = 0.6  #: covered pixels × U(0, occlusion_shade) (0: opaque black)
+    detection_probability: float = 1.0  #: emulated detections: probability that a frame gives a detection
+    intrinsics_tolerance: float = 0.0  #: true fx, fy = nominal × (1 + U(−tol, tol)) [-], per UAV
+    principal_point_tolerance: float = 0.0  #: true cx, cy = nominal + U(−tol, tol) [px], per UAV
+    mounting_angle_tolerance: float = 0.0  #: true b_T_C ZXZ angles = Table D.1 + U(−tol, tol) [rad], per UAV
+    mounting_translation_tolerance: float = 0.0  #: true b_T_C translation = Table D.1 + U(−tol, tol) [m] per axis
 
 
 @dataclass
@@ -495,10 +540,23 @@ class AerodynamicsConfig:
 
 @dataclass
 class MotionCaptureConfig:
-    """Realism: the motion capture the centralized modes fly on (``/fpr/motion_capture``): noise, latency,
-    dropouts. Ideal: an exact copy of the ground truth, no delay."""
+    """Realism: the motion capture the centralized modes fly on (``/fpr/motion_capture``, fpr_msgs/FprState, the
+    topic a MOCAP bridge publishes on the real robot). Enabled: at ``rate``, each frame is dropped with
+    ``dropout_probability`` (missed frames), else stamped at its capture instant and published ``latency`` later,
+    with Gaussian noise on the platform and UAV positions (``position_noise`` per axis) and attitudes
+    (``attitude_noise`` per axis, right-multiplied), the leg angles (``leg_angle_noise``), the linear velocities
+    (``velocity_noise``) and the platform and leg rates (``rate_noise``). Disabled (ideal): an exact copy of
+    ``/fpr/ground_truth``, published with it, undelayed. ``/fpr/ground_truth`` is always the exact truth."""
 
     enabled: bool = False
+    rate: float = 100.0  #: [Hz] frames (simulation time)
+    latency: float = 0.0  #: [s] capture instant (the stamp) to publication
+    dropout_probability: float = 0.0  #: probability that a frame is missed
+    position_noise: float = 0.0  #: [m] 1σ per axis
+    attitude_noise: float = 0.0  #: [rad] 1σ per axis
+    leg_angle_noise: float = 0.0  #: [rad] 1σ
+    velocity_noise: float = 0.0  #: [m/s] 1σ per axis
+    rate_noise: float = 0.0  #: [rad/s] 1σ per axis (platform angular rate, leg rates)
 
 
 @dataclass
@@ -749,7 +807,34 @@ def scenario_from_dict(data: dict | None, realism: str | None = None) -> Scenari
         raise ValueError(f"joint_stops: need 0 <= lower < upper <= π [rad] and stiffness, damping >= 0, got {stops}")
     if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
         raise ValueError("px4.controller_rate and cameras.rate must be > 0")
+    _validate_sensors(scenario.sensors, scenario.cameras, scenario.motion_capture)
     return scenario
+
+
+def _validate_sensors(sensors: SensorConfig, cameras: CameraConfig, mocap: MotionCaptureConfig) -> None:
+    """Noise levels, times and tolerances >= 0 and finite; probabilities in [0, 1]; mocap.rate > 0."""
+    groups = (("sensors", sensors, [f.name for f in dataclasses.fields(SensorConfig)]),
+              ("cameras", cameras, ["position_noise", "angle_noise", "pixel_noise", "blur_sigma", "latency",
+                                    "exposure_time", "contrast_variation", "brightness_variation",
+                                    "lighting_gradient", "occlusion_width", "occlusion_shade",
+                                    "intrinsics_tolerance", "principal_point_tolerance", "mounting_angle_tolerance",
+                                    "mounting_translation_tolerance"]),
+              ("motion_capture", mocap, ["latency", "position_noise", "attitude_noise", "leg_angle_noise",
+                                         "velocity_noise", "rate_noise"]))
+    for group, config, names in groups:
+        for name in names:
+            value = getattr(config, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                raise ValueError(f"{group}.{name}: must be finite and >= 0, got {value}")
+    for group, config, name in (("cameras", cameras, "occlusion_probability"),
+                                ("cameras", cameras, "detection_probability"),
+                                ("motion_capture", mocap, "dropout_probability")):
+        if not 0.0 <= getattr(config, name) <= 1.0:
+            raise ValueError(f"{group}.{name}: must be within [0, 1], got {getattr(config, name)}")
+    if cameras.intrinsics_tolerance >= 0.5:
+        raise ValueError(f"cameras.intrinsics_tolerance: must be < 0.5, got {cameras.intrinsics_tolerance}")
+    if not (mocap.rate > 0.0 and math.isfinite(mocap.rate)):
+        raise ValueError(f"motion_capture.rate: must be finite and > 0 [Hz], got {mocap.rate}")
 
 
 def _vector3(value: list[float] | None, name: str, nonzero: bool = False) -> np.ndarray:

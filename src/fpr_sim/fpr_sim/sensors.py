@@ -1,21 +1,33 @@
-"""What each PX4 measures and reports: IMU with noise and a constant gyro bias, attitude and position in the
-vehicle's OWN local frame F0i (thesis §4.1: each quadrotor's local ENU frame has an unknown yaw offset ψ0i from
-the world frame F0 and its origin at the take-off position).
+"""What each PX4 measures and reports: IMU with white noise, a gyro and an accelerometer bias (turn-on draw plus a
+random walk advanced in simulation time), attitude and position in the vehicle's OWN local frame F0i (thesis §4.1:
+each quadrotor's local ENU frame has an unknown yaw offset ψ0i from the world frame F0 and its origin at the
+take-off position). Also the motion capture of the centralized modes (:class:`MotionCapture`) and the delay line
+the simulator holds latent measurements in (:class:`DelayLine`).
 
 Frames: F0 world ENU; F0i = F0 rotated by ψ0i about z, origin ``origin_i`` (world); body FLU. Units SI, rad.
-Deterministic for a seed: one numpy Generator per UAV, spawned from the scenario seed.
+Deterministic for a seed: one numpy Generator per UAV, spawned from the scenario seed, for the historical
+white noise and constant gyro bias; the realism effects (accelerometer bias, bias random walks, motion capture)
+draw from streams of their own, so the ideal profile's samples are unchanged and each effect changes only itself.
+
+IMU model (per axis, body FLU): ``ω_m = ω + b_g + n_g``, ``f_m = f + b_a + n_a``, n ~ N(0, σ²) per sample,
+``b(t_k) = b(t_{k−1}) + σ_rw √(t_k − t_{k−1}) ξ_k`` (PX4 EKF2's bias random walk, EKF2_GYR_B_NOISE /
+EKF2_ACC_B_NOISE), ``b(0)`` ~ N(0, σ_b²) per UAV.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import heapq
+import itertools
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from fpr_model.rotations import quat_from_rotvec, quat_multiply, quat_to_rotmat
 
-from fpr_sim.scenario import Scenario, SensorConfig, per_uav
+from fpr_sim.plant import GroundTruth
+from fpr_sim.scenario import MotionCaptureConfig, Scenario, SensorConfig, per_uav
 
-__all__ = ["ImuSample", "UavSensors"]
+__all__ = ["DelayLine", "ImuSample", "MotionCapture", "UavSensors"]
 
 
 @dataclass
@@ -38,6 +50,12 @@ class UavSensors:
         seeds = np.random.SeedSequence(scenario.seed).spawn(n)
         self.rngs = [np.random.default_rng(s) for s in seeds]
         self.gyro_bias = np.array([rng.normal(0.0, self.config.gyro_bias, 3) for rng in self.rngs])
+        bias_seeds = np.random.SeedSequence([scenario.seed, 11]).spawn(n)
+        #: per UAV: the accelerometer-bias / random-walk stream (apart from the white noise: the ideal stays intact)
+        self.bias_rngs = [np.random.default_rng(s) for s in bias_seeds]
+        self.accel_bias = np.array([rng.normal(0.0, self.config.accel_bias, 3) if self.config.accel_bias > 0.0
+                                    else np.zeros(3) for rng in self.bias_rngs])
+        self._bias_time = np.full(n, np.nan)  # [s] instant each UAV's bias was last advanced to
         self.yaw_offsets = np.array([float(per_uav(scenario.px4.yaw_offsets, i)) for i in range(n)])
         self.origins = np.array(origins, dtype=float)
         half = 0.5 * self.yaw_offsets
@@ -45,10 +63,27 @@ class UavSensors:
         self.world_to_local = np.stack([np.cos(half), np.zeros(n), np.zeros(n), -np.sin(half)], axis=1)
         self.world_to_local_R = quat_to_rotmat(self.world_to_local)
 
-    def sample(self, i: int, quat_world: np.ndarray, rate: np.ndarray, specific_force: np.ndarray,
-               position_world: np.ndarray, velocity_world: np.ndarray) -> ImuSample:
-        """Noisy measurement of UAV i (0-based) from its true state (world ENU, body FLU)."""
+    def advance_biases(self, i: int, t: float) -> None:
+        """Random walk of UAV i's gyro and accelerometer biases from their last instant to ``t`` [s] (simulation
+        time): ``b += σ_rw √Δt ξ`` (exact for a Wiener process whatever the sampling rate). No-op at 0 densities."""
         c = self.config
+        previous, self._bias_time[i] = self._bias_time[i], t
+        if not (c.gyro_bias_random_walk > 0.0 or c.accel_bias_random_walk > 0.0) or not np.isfinite(previous):
+            return
+        dt = t - previous
+        if dt <= 0.0:
+            return
+        xi = self.bias_rngs[i].standard_normal(6)
+        self.gyro_bias[i] += c.gyro_bias_random_walk * np.sqrt(dt) * xi[:3]
+        self.accel_bias[i] += c.accel_bias_random_walk * np.sqrt(dt) * xi[3:]
+
+    def sample(self, i: int, quat_world: np.ndarray, rate: np.ndarray, specific_force: np.ndarray,
+               position_world: np.ndarray, velocity_world: np.ndarray, t: float | None = None) -> ImuSample:
+        """Noisy measurement of UAV i (0-based) from its true state (world ENU, body FLU) at ``t`` [s] (simulation
+        time; advances the bias random walk, None: biases as they are)."""
+        c = self.config
+        if t is not None:
+            self.advance_biases(i, float(t))
         rng = self.rngs[i]
         noise_rot = quat_from_rotvec(rng.normal(0.0, c.attitude_noise, 3))
         quat_local = quat_multiply(quat_multiply(self.world_to_local[i], quat_world), noise_rot)
@@ -56,7 +91,7 @@ class UavSensors:
         return ImuSample(
             quat_local=quat_local / np.linalg.norm(quat_local),
             rate=rate + self.gyro_bias[i] + rng.normal(0.0, c.gyro_noise, 3),
-            specific_force=specific_force + rng.normal(0.0, c.accel_noise, 3),
+            specific_force=specific_force + rng.normal(0.0, c.accel_noise, 3) + self.accel_bias[i],
             position_local=R @ (position_world - self.origins[i]) + rng.normal(0.0, c.position_noise, 3),
             velocity_local=R @ velocity_world + rng.normal(0.0, c.velocity_noise, 3),
         )
@@ -69,3 +104,69 @@ class UavSensors:
     def world_to_local_quat(self, i: int, quat_world: np.ndarray) -> np.ndarray:
         """An attitude in F0 expressed in F0i: ``q_F0i = q_{F0i<-F0} ∘ q_F0``."""
         return quat_multiply(self.world_to_local[i], quat_world)
+
+
+class DelayLine:
+    """Items held until their publication time (simulation time [s]): :meth:`push` ``(due, item)``, :meth:`pop_due`
+    returns every item due at ``t`` in due order (ties in push order). Latency of cameras and motion capture."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, Any]] = []
+        self._order = itertools.count()
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, due: float, item: Any) -> None:
+        heapq.heappush(self._heap, (float(due), next(self._order), item))
+
+    def pop_due(self, t: float, tolerance: float = 1e-9) -> list[Any]:
+        out = []
+        while self._heap and self._heap[0][0] <= t + tolerance:
+            out.append(heapq.heappop(self._heap)[2])
+        return out
+
+
+class MotionCapture:
+    """Motion capture (Vicon / Qualisys / OptiTrack-like) of the whole robot for the centralized modes: see
+    :class:`fpr_sim.scenario.MotionCaptureConfig`. :meth:`measure` gives the frame captured now (a noisy copy of the
+    ground truth, same instant) or None for a missed frame; disabled, the exact truth. Seeded: one stream for the
+    dropouts and one for the noise (so a dropout probability does not change the noise of the frames kept)."""
+
+    def __init__(self, config: MotionCaptureConfig, seed: int) -> None:
+        self.config = config
+        drop_seed, noise_seed = np.random.SeedSequence([seed, 13]).spawn(2)
+        self._drop_rng = np.random.default_rng(drop_seed)
+        self._noise_rng = np.random.default_rng(noise_seed)
+
+    @property
+    def latency(self) -> float:
+        """[s] capture to publication (0 when disabled)."""
+        return self.config.latency if self.config.enabled else 0.0
+
+    def measure(self, truth: GroundTruth) -> GroundTruth | None:
+        """The motion-capture frame of ``truth`` (world ENU, Fp / body FLU as in GroundTruth); None: dropped."""
+        c = self.config
+        if not c.enabled:
+            return truth
+        if c.dropout_probability > 0.0 and self._drop_rng.random() < c.dropout_probability:
+            return None
+        rng, s = self._noise_rng, truth.state
+        n = len(truth.uav_quats)
+        state = replace(s, position=s.position + rng.normal(0.0, c.position_noise, 3),
+                        quat=_perturb(s.quat, rng.normal(0.0, c.attitude_noise, 3)),
+                        leg_angles=s.leg_angles + rng.normal(0.0, c.leg_angle_noise, n),
+                        velocity=s.velocity + rng.normal(0.0, c.velocity_noise, 3),
+                        rate=s.rate + rng.normal(0.0, c.rate_noise, 3),
+                        leg_rates=s.leg_rates + rng.normal(0.0, c.rate_noise, n))
+        uav_quats = np.array([_perturb(q, rng.normal(0.0, c.attitude_noise, 3)) for q in truth.uav_quats])
+        return replace(truth, state=state,
+                       uav_positions=truth.uav_positions + rng.normal(0.0, c.position_noise, (n, 3)),
+                       uav_quats=uav_quats,
+                       uav_velocities=truth.uav_velocities + rng.normal(0.0, c.velocity_noise, (n, 3)))
+
+
+def _perturb(quat: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
+    """``q ∘ exp(δ)``: a small rotation δ [rad] about the body axes, renormalised."""
+    out = quat_multiply(quat, quat_from_rotvec(rotvec))
+    return out / np.linalg.norm(out)

@@ -218,7 +218,7 @@ class Simulation:
             sample = None
             if emulator.needs_sample(due):
                 sample = self.sensors.sample(i, truth.uav_quats[i], truth.uav_rates[i], truth.uav_specific_forces[i],
-                                             truth.uav_positions[i], truth.uav_velocities[i])
+                                             truth.uav_positions[i], truth.uav_velocities[i], t=truth.time)
             emulator.send_messages(due, truth.time, sample, float(truth.battery_voltages[i]),
                                    float(truth.battery_remaining[i]), float(self.plant.fleet.battery.current[i]))
 

@@ -3,7 +3,10 @@ around :class:`fpr_sim.simulation.Simulation` (DESIGN.md §3, §5).
 
 Publishes ``/clock`` (rosgraph_msgs/Clock, ``clock_rate`` ≤ 250 Hz), ``/fpr/ground_truth`` (fpr_msgs/FprState),
 and per UAV ``/fpr/uav<i>/camera/image_raw`` + ``camera/camera_info`` (20 Hz), or ``/fpr/uav<i>/marker``
-(fpr_msgs/MarkerDetection) when ``cameras.emulated`` is set in the scenario or ``emulated_cameras`` is true, and,
+(fpr_msgs/MarkerDetection) when ``cameras.emulated`` is set in the scenario or ``emulated_cameras`` is true, each
+stamped at its exposure instant and published ``cameras.latency`` later (the first /clock tick at or after),
+``/fpr/motion_capture`` (fpr_msgs/FprState, the centralized modes' motion capture: fpr_sim.sensors.MotionCapture,
+an exact copy of the ground truth published with it unless ``motion_capture.enabled``), and,
 when the scenario enables ``target``, ``/fpr/target`` (geometry_msgs/PoseStamped, frame ``flat_platform``, at
 ``target.rate``): the noisy relative pose of the target of fpr_sim.target (thesis §4.4.2, (4.39)). Camera and
 target topics use the sensor-data QoS.
@@ -27,7 +30,9 @@ from sensor_msgs.msg import CameraInfo, Image
 from fpr_msgs.msg import FprState, MarkerDetection
 from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
+from fpr_sim.plant import GroundTruth
 from fpr_sim.scenario import load_scenario
+from fpr_sim.sensors import DelayLine, MotionCapture
 from fpr_sim.simulation import Simulation, SimulationOptions
 from fpr_sim.target import TARGET_FRAME, TargetEmulator
 
@@ -102,6 +107,12 @@ class SimulatorNode(Node):
             if self.scenario.cameras.enabled else None
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.truth_pub = self.create_publisher(FprState, "/fpr/ground_truth", 10)
+        self.mocap = MotionCapture(self.scenario.motion_capture, self.scenario.seed)
+        self.mocap_pub = self.create_publisher(FprState, "/fpr/motion_capture", 10)
+        self.mocap_period = 1.0 / self.scenario.motion_capture.rate
+        self._next_mocap = 0.0
+        #: latent messages (camera frames, detections, motion-capture frames): (publisher, message) by due time
+        self.pending = DelayLine()
         self.image_pubs, self.info_pubs, self.marker_pubs = [], [], []
         for i in range(1, self.sim.n + 1):
             if self.emulated:
@@ -179,11 +190,21 @@ class SimulatorNode(Node):
         self.clock_pub.publish(Clock(clock=_stamp(t)))
         if t + 1e-9 >= self._next_truth:
             self._next_truth += self.truth_period
-            self.truth_pub.publish(self._truth_message())
+            truth_msg = self._truth_message()
+            self.truth_pub.publish(truth_msg)
+            if not self.mocap.config.enabled:
+                self.mocap_pub.publish(truth_msg)  # ideal motion capture: the exact truth, undelayed
             self.last_truth_time = t  #: [s] stamp of the latest /fpr/ground_truth published
+        if self.mocap.config.enabled and t + 1e-9 >= self._next_mocap:
+            self._next_mocap += self.mocap_period
+            frame = self.mocap.measure(self.sim.ground_truth())
+            if frame is not None:
+                self._publish_later(t + self.mocap.latency, self.mocap_pub, self._state_message(frame))
         if self.cameras is not None and t + 1e-9 >= self._next_camera:
             self._next_camera += self.camera_period
             self._publish_cameras(t)
+        for publisher, message in self.pending.pop_due(t):
+            publisher.publish(message)
         if self.target is not None and t + 1e-9 >= self._next_target:
             self._next_target += self.target_period
             self.target_pub.publish(self._target_message(t))
@@ -217,8 +238,20 @@ class SimulatorNode(Node):
                 self.get_logger().info(f"{what} {'attached' if change.attached else 'released'} at "
                                        f"t = {change.time:.3f} s")
 
+    def _publish_later(self, due: float, publisher, message) -> None:
+        """Publish ``message`` at ``due`` [s] simulation time (now if due already; else at the first /clock tick at or
+        after it)."""
+        if due <= self.sim.time + 1e-9:
+            publisher.publish(message)
+        else:
+            self.pending.push(due, (publisher, message))
+
     def _truth_message(self) -> FprState:
-        truth = self.sim.ground_truth()
+        return self._state_message(self.sim.ground_truth())
+
+    @staticmethod
+    def _state_message(truth: GroundTruth) -> FprState:
+        """fpr_msgs/FprState of a ground truth (or a motion-capture frame of it), stamped at its instant."""
         s = truth.state
         msg = FprState()
         msg.header.stamp = _stamp(truth.time)
@@ -250,8 +283,11 @@ class SimulatorNode(Node):
     def _publish_cameras(self, t: float) -> None:
         truth = self.sim.ground_truth()
         stamp = _stamp(t)
+        due = t + self.scenario.cameras.latency
         if self.emulated:
             for i, detection in enumerate(self.cameras.emulate(truth)):
+                if detection is None:
+                    continue  # a missed detection (cameras.detection_probability)
                 T = detection.camera_T_marker
                 from fpr_model.rotations import rotmat_to_quat
 
@@ -264,7 +300,7 @@ class SimulatorNode(Node):
                 msg.ambiguity_ratio = float("inf")
                 msg.corners = [float("nan")] * 8
                 msg.marker_size = float(self.cameras.calibration.marker_size)
-                self.marker_pubs[i].publish(msg)
+                self._publish_later(due, self.marker_pubs[i], msg)
             return
         camera = self.cameras.calibration.camera
         for i, frame in enumerate(self.cameras.render(truth)):
@@ -275,8 +311,8 @@ class SimulatorNode(Node):
             image.encoding = "mono8"
             image.step = image.width
             image.data = frame.image.tobytes()
-            self.image_pubs[i].publish(image)
-            info = CameraInfo()
+            self._publish_later(due, self.image_pubs[i], image)
+            info = CameraInfo()  # the NOMINAL calibration (what the estimator is configured with)
             info.header = image.header
             info.height, info.width = camera.height, camera.width
             info.distortion_model = "plumb_bob"
@@ -284,7 +320,7 @@ class SimulatorNode(Node):
             info.k = [float(v) for v in np.asarray(camera.camera_matrix).reshape(-1)]
             info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
             info.p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
-            self.info_pubs[i].publish(info)
+            self._publish_later(due, self.info_pubs[i], info)
 
     def destroy_node(self) -> None:
         self.sim.close()
