@@ -7,8 +7,9 @@ cameras (rendered images + ``aruco_detector``, or the simulator's emulated marke
 - ``sim``: the ``simulator`` node replaces the hardware; every node runs on simulated time (``use_sim_time``);
 - ``real``: the robot. No simulator, no ``use_sim_time``; the camera images come from a camera driver on each
   companion computer (``/fpr/uav<i>/camera/image_raw`` + ``camera_info``), the PX4 links from each bridge's
-  ``connection_url`` (a params file per vehicle), and ``/fpr/ground_truth`` (centralized / ground-truth modes
-  only) from a motion-capture bridge.
+  ``connection_url`` (a params file per vehicle), and ``/fpr/motion_capture`` (fpr_msgs/FprState; the centralized /
+  ground-truth modes only, the controllers' ``motion_capture_topic``) from a motion-capture bridge. In simulation
+  the simulator publishes it (fpr_sim ``motion_capture``: exact in the ideal profile, noisy and late in hardware).
 
 Three consumers use it and nothing else: the in-process runner (:mod:`fpr_experiments.inprocess`, one executor),
 the multi-process runner (:mod:`fpr_experiments.processes`, one process per group: ``simulator``, ``uav<i>``,

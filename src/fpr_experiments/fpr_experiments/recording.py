@@ -57,6 +57,7 @@ class Topic:
 def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[Topic]:
     """Every topic a run records (see the module doc)."""
     topics = [Topic("/clock", Clock, False), Topic("/fpr/ground_truth", FprState, True),
+              Topic("/fpr/motion_capture", FprState, True),
               Topic("/fpr/teleop", TeleopCommand, True), Topic("/fpr/info", InformationVector, False),
               Topic("/fpr/ground/joy", Joy, True)]
     if pilot:
