@@ -48,16 +48,27 @@ fi
 # ---- 3. colcon build ----------------------------------------------------------------------
 # With --symlink-install, edits to existing Python modules need no rebuild; a rebuild is needed when
 # the set of files or any manifest, message, CMake or config file changes.
-src_hash=$(cd "$ROOT" && { find src colcon.meta -type f -not -path '*/__pycache__/*' -not -name '*.pyc' | LC_ALL=C sort;
-  find src colcon.meta -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
-    -o -name '*.msg' -o -name '*.yaml' -o -name '*.c' -o -name colcon.meta \) -print0 | LC_ALL=C sort -z | xargs -0 cat; } | sha256sum | cut -d' ' -f1)
+# Standard message packages the wheels lack (vendor/, see vendor/COLCON_IGNORE): built only when the venv's own
+# Python cannot import them (a real ROS 2 install has them).
+vendor_paths=()
+for pkg in "$ROOT"/vendor/*/; do
+  name=$(basename "$pkg")
+  if ! env -u PYTHONPATH -u AMENT_PREFIX_PATH "$VENV/bin/python" -c "import $name.msg" >/dev/null 2>&1; then
+    vendor_paths+=("vendor/$name")
+  fi
+done
+src_hash=$(cd "$ROOT" && { find src vendor colcon.meta -type f -not -path '*/__pycache__/*' -not -name '*.pyc' | LC_ALL=C sort;
+  find src vendor colcon.meta -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
+    -o -name '*.msg' -o -name '*.yaml' -o -name '*.c' -o -name colcon.meta \) -print0 | LC_ALL=C sort -z | xargs -0 cat;
+  echo "${vendor_paths[*]}"; } | sha256sum | cut -d' ' -f1)
 if [[ "$(cat "$ROOT/install/.fpr-build" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/install/setup.bash" ]]; then
   say "colcon build --symlink-install (log: log/setup/colcon.log)"
   (
     cd "$ROOT"
     export PATH="$VENV/bin:$PATH" VIRTUAL_ENV="$VENV" CMAKE_PREFIX_PATH="$VENV" AMENT_PREFIX_PATH="$VENV"
     export PYTHONWARNINGS=ignore::DeprecationWarning
-    if ! colcon build --symlink-install --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" \
+    if ! colcon build --symlink-install --base-paths src "${vendor_paths[@]}" \
+        --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" \
         >"$LOG_DIR/colcon.log" 2>&1; then
       tail -40 "$LOG_DIR/colcon.log" >&2
       say "colcon build failed"; exit 1

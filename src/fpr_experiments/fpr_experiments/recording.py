@@ -17,11 +17,12 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, Imu, Joy
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 
 from fpr_experiments.mcap_log import RosMcapWriter, stamp_ns
 from fpr_experiments.records import (
@@ -52,6 +53,7 @@ class Topic:
     name: str
     msg_type: type
     reliable: bool  #: the publisher is reliable (subscribe reliable: no drops); else best effort
+    latched: bool = False  #: transient local (/tf_static, /robot_description): the last message, whenever joined
 
 
 def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[Topic]:
@@ -59,7 +61,9 @@ def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[T
     topics = [Topic("/clock", Clock, False), Topic("/fpr/ground_truth", FprState, True),
               Topic("/fpr/motion_capture", FprState, True),
               Topic("/fpr/teleop", TeleopCommand, True), Topic("/fpr/info", InformationVector, False),
-              Topic("/fpr/ground/joy", Joy, True)]
+              Topic("/fpr/ground/joy", Joy, True), Topic("/tf", TFMessage, True),
+              Topic("/tf_static", TFMessage, True, latched=True),
+              Topic("/robot_description", String, True, latched=True)]
     if pilot:
         topics.append(Topic(PILOT_EVENTS, String, True))
     if target:
@@ -88,7 +92,9 @@ class Recorder(Node):
         self._data: dict[str, list[bytes]] = {name: [] for name in self.topics}
         for topic in self.topics.values():
             qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE if topic.reliable
-                             else ReliabilityPolicy.BEST_EFFORT)
+                             else ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if topic.latched
+                             else DurabilityPolicy.VOLATILE)
             self.create_subscription(topic.msg_type, topic.name, self._keep(self._data[topic.name]), qos, raw=True)
         self._executor = SingleThreadedExecutor(context=context)
         self._executor.add_node(self)
@@ -175,6 +181,8 @@ def log_time_ns(msg) -> int:
     pilot's JSON events (std_msgs/String) carry theirs as "t" [s]."""
     if hasattr(msg, "header") or hasattr(msg, "clock"):
         return stamp_ns(msg)
+    if hasattr(msg, "transforms"):  # tf2_msgs/TFMessage: its first transform's stamp
+        return stamp_ns(msg.transforms[0]) if msg.transforms else 0
     import json
 
     try:

@@ -1,6 +1,7 @@
 """The FPR as a URDF robot description, generated from its parameters for any n (ROS-free).
 
-Kinematic tree (frame names with a ``prefix``, default ``fpr/``; the TF tree the simulator publishes uses them):
+Kinematic tree (frame names after a ``prefix``, default none: the names of the TF tree fpr_sim publishes, next to
+the frames already on the topics, e.g. ``uav<i>/camera_optical`` of the images):
 
 - ``{prefix}platform`` — the platform frame Fp at P (root link; ``world -> {prefix}platform`` is the platform's
   pose, published on /tf, not part of the URDF);
@@ -57,7 +58,7 @@ def _visual(geometry: str, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), material: s
             f'      <geometry>{geometry}</geometry>\n      <material name="{material}"/>\n    </visual>\n')
 
 
-def robot_description(params: FprParameters, prefix: str = "fpr/", name: str = "fpr",
+def robot_description(params: FprParameters, prefix: str = "", name: str = "fpr",
                       leg_limits: tuple[float, float] = (math.radians(10.0), math.radians(92.0)),
                       uav_inertia=(0.011, 0.011, 0.021)) -> str:
     """URDF (XML text) of the FPR ``params`` (see the module doc for frames and joints). ``leg_limits`` [rad]: the

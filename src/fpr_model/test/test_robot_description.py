@@ -29,8 +29,8 @@ def test_urdf_chain_matches_the_inverse_geometric_model(n):
     params = default_parameters(n)
     root = ElementTree.fromstring(robot_description(params))
     links = {link.get("name") for link in root.iter("link")}
-    assert links == {"fpr/platform", *[f"fpr/leg{k}" for k in range(1, n + 1)],
-                     *[f"fpr/uav{k}/base_link" for k in range(1, n + 1)]}
+    assert links == {"platform", *[f"leg{k}" for k in range(1, n + 1)],
+                     *[f"uav{k}/base_link" for k in range(1, n + 1)]}
     joints = {joint.get("name"): joint for joint in root.iter("joint")}
     assert len(joints) == 2 * n
     leg_angles = np.radians(np.linspace(40.0, 70.0, n))
@@ -40,13 +40,13 @@ def test_urdf_chain_matches_the_inverse_geometric_model(n):
     expected = inverse_geometric_model(params, make_configuration(position, quat, leg_angles))
     platform_rotation = quat_to_rotmat(quat)
     for k in range(1, n + 1):
-        leg = joints[f"fpr/leg{k}_joint"]
+        leg = joints[f"leg{k}_joint"]
         assert leg.get("type") == "revolute" and leg.find("axis").get("xyz") == "0 0 1"
         origin = leg.find("origin")
         theta = leg_angles[k - 1]
         leg_rotation = _rpy_matrix(*_floats(origin.get("rpy"))) @ _rpy_matrix(0.0, 0.0, theta)
-        tip_in_leg = np.array(_floats(joints[f"fpr/uav{k}_joint"].find("origin").get("xyz")))
-        assert joints[f"fpr/uav{k}_joint"].get("type") == "floating"
+        tip_in_leg = np.array(_floats(joints[f"uav{k}_joint"].find("origin").get("xyz")))
+        assert joints[f"uav{k}_joint"].get("type") == "floating"
         tip = position + platform_rotation @ (np.array(_floats(origin.get("xyz"))) + leg_rotation @ tip_in_leg)
         np.testing.assert_allclose(tip, expected[k - 1], atol=1e-7)
 

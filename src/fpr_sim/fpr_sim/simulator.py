@@ -10,6 +10,11 @@ an exact copy of the ground truth published with it unless ``motion_capture.enab
 when the scenario enables ``target``, ``/fpr/target`` (geometry_msgs/PoseStamped, frame ``flat_platform``, at
 ``target.rate``): the noisy relative pose of the target of fpr_sim.target (thesis §4.4.2, (4.39)). Camera and
 target topics use the sensor-data QoS.
+
+For RViz and Foxglove: ``/tf`` (tf2_msgs/TFMessage, ``tf_rate``, default 50 Hz, 0 = off: world -> platform ->
+leg<i> -> uav<i>/base_link from the ground truth, fpr_sim.tf_tree), ``/tf_static`` (each UAV's true camera mounting,
+uav<i>/base_link -> uav<i>/camera_optical, the images' frame) and ``/robot_description`` (std_msgs/String, the URDF
+of the TRUE robot, fpr_model.robot_description), both latched (transient local), as robot_state_publisher does.
 """
 
 from __future__ import annotations
@@ -19,13 +24,16 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
+from fpr_model.robot_description import robot_description
 from fpr_px4_bridge.link import load_signing_key
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, TransformStamped, Vector3
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 
 from fpr_msgs.msg import FprState, MarkerDetection
 from fpr_sim._kernels import kernel_summary
@@ -35,6 +43,7 @@ from fpr_sim.scenario import load_scenario
 from fpr_sim.sensors import DelayLine, MotionCapture
 from fpr_sim.simulation import Simulation, SimulationOptions
 from fpr_sim.target import TARGET_FRAME, TargetEmulator
+from fpr_sim.tf_tree import FrameTransform, camera_transforms, robot_transforms
 
 
 def _stamp(t: float) -> Time:
@@ -69,6 +78,8 @@ class SimulatorNode(Node):
         p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
         p("clock_rate", 250.0, descriptor=_desc("/clock publishing rate [Hz], at most 250"))
         p("ground_truth_rate", 100.0, descriptor=_desc("/fpr/ground_truth rate [Hz]"))
+        p("tf_rate", 50.0, descriptor=_desc("/tf rate [Hz] (the true robot's frames for RViz / Foxglove); 0 = no /tf, "
+                                            "/tf_static nor /robot_description"))
         p("local_base_port", 14580, descriptor=_desc(
             "UAV i's PX4 emulator binds 127.0.0.1:local_base_port+i-1, as PX4 SITL instance i-1 (0: ephemeral)"))
         p("remote_base_port", 14540, descriptor=_desc(
@@ -129,6 +140,7 @@ class SimulatorNode(Node):
                            if self.target is not None else None)
         self.target_period = 1.0 / self.scenario.target.rate
         self._next_target = 0.0
+        self._setup_tf(float(get("tf_rate").value))
         self._next_truth = 0.0
         self.last_truth_time: float | None = None
         self._next_camera = 0.0
@@ -195,6 +207,9 @@ class SimulatorNode(Node):
             if not self.mocap.config.enabled:
                 self.mocap_pub.publish(truth_msg)  # ideal motion capture: the exact truth, undelayed
             self.last_truth_time = t  #: [s] stamp of the latest /fpr/ground_truth published
+        if self.tf_pub is not None and t + 1e-9 >= self._next_tf:
+            self._next_tf += self.tf_period
+            self._publish_tf()
         if self.mocap.config.enabled and t + 1e-9 >= self._next_mocap:
             self._next_mocap += self.mocap_period
             frame = self.mocap.measure(self.sim.ground_truth())
@@ -237,6 +252,44 @@ class SimulatorNode(Node):
             else:
                 self.get_logger().info(f"{what} {'attached' if change.attached else 'released'} at "
                                        f"t = {change.time:.3f} s")
+
+    def _setup_tf(self, rate: float) -> None:
+        """/tf publisher at ``rate`` [Hz] (0: none), and the latched /tf_static and /robot_description."""
+        self.tf_pub = None
+        self._next_tf = 0.0
+        if not rate > 0.0:
+            return
+        self.tf_period = 1.0 / rate
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.description_pub = self.create_publisher(String, "/robot_description", latched)
+        self.description_pub.publish(String(data=robot_description(self.sim.plant.params)))
+        mounts = ([camera.body_T_camera for camera in self.cameras.true_cameras] if self.cameras is not None else [])
+        self.tf_static_pub = self.create_publisher(TFMessage, "/tf_static", latched)
+        self.tf_static_pub.publish(self._tf_message(camera_transforms(mounts), self.sim.time))
+
+    def _publish_tf(self) -> None:
+        truth = self.sim.ground_truth()
+        s = truth.state
+        transforms = robot_transforms(self.sim.plant.params, s.position, s.quat, s.leg_angles, truth.uav_positions,
+                                      truth.uav_quats)
+        self.tf_pub.publish(self._tf_message(transforms, truth.time))
+
+    @staticmethod
+    def _tf_message(transforms: list[FrameTransform], t: float) -> TFMessage:
+        msg = TFMessage()
+        for transform in transforms:
+            stamped = TransformStamped()
+            stamped.header.stamp = _stamp(t)
+            stamped.header.frame_id = transform.parent
+            stamped.child_frame_id = transform.child
+            x, y, z = (float(v) for v in transform.translation)
+            stamped.transform.translation = Vector3(x=x, y=y, z=z)
+            w, qx, qy, qz = (float(v) for v in transform.quat)
+            stamped.transform.rotation = Quaternion(x=qx, y=qy, z=qz, w=w)
+            msg.transforms.append(stamped)
+        return msg
 
     def _publish_later(self, due: float, publisher, message) -> None:
         """Publish ``message`` at ``due`` [s] simulation time (now if due already; else at the first /clock tick at or

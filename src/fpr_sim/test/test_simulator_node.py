@@ -156,3 +156,52 @@ def test_simulator_process_with_an_unknown_scenario_says_so_in_one_line_and_exit
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "scenario 'hoover'" in lines[0] and "hover" in lines[0], result.stderr
     assert "Traceback" not in result.stderr + result.stdout
+
+
+def test_simulator_node_publishes_tf_and_the_robot_description():
+    """/tf (1 + 2n true transforms at tf_rate), latched /tf_static (camera mounts) and /robot_description (URDF),
+    received by a late subscriber as robot_state_publisher's are."""
+    import xml.etree.ElementTree as ElementTree
+
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import SimulatorNode
+
+        overrides = [Parameter("real_time_factor", value=0.0), Parameter("duration", value=0.5),
+                     Parameter("local_base_port", value=0), Parameter("remote_base_port", value=0),
+                     Parameter("emulated_cameras", value=True)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        listener = rclpy.create_node("tf_listener")   # joins after the latched messages went out
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        tfs, statics, descriptions = [], [], []
+        listener.create_subscription(TFMessage, "/tf", tfs.append, 100)
+        listener.create_subscription(TFMessage, "/tf_static", statics.append, latched)
+        listener.create_subscription(String, "/robot_description", descriptions.append, latched)
+        executor = SingleThreadedExecutor()
+        executor.add_node(listener)
+        deadline = time.monotonic() + 5.0
+        while sim_node.tf_pub.get_subscription_count() == 0 or not (statics and descriptions):
+            executor.spin_once(timeout_sec=0.05)
+            assert time.monotonic() < deadline, "discovery / latched messages timed out"
+        thread = threading.Thread(target=sim_node.run)
+        thread.start()
+        while thread.is_alive():
+            executor.spin_once(timeout_sec=0.02)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.02)
+        thread.join()
+        sim_node.destroy_node()
+        listener.destroy_node()
+        assert 20 <= len(tfs) <= 27                                # 50 Hz over 0.5 s simulated
+        children = [t.child_frame_id for t in tfs[-1].transforms]
+        assert children == ["platform", "leg1", "uav1/base_link", "leg2", "uav2/base_link", "leg3", "uav3/base_link"]
+        assert [t.child_frame_id for t in statics[0].transforms] == [f"uav{i}/camera_optical" for i in (1, 2, 3)]
+        links = {link.get("name") for link in ElementTree.fromstring(descriptions[0].data).iter("link")}
+        assert {"platform", "leg1", "uav3/base_link"} <= links and len(links) == 7
+    finally:
+        rclpy.shutdown()
