@@ -56,7 +56,7 @@ def _local_state_ages(recording, n: int) -> dict[int, tuple[np.ndarray, np.ndarr
     stamped at or before it, i.e. how old the controller's estimate is at best (NaN: none yet)."""
     ages = {}
     for i in range(1, n + 1):
-        t_d = np.array([_stamp(m) for m in recording.get(f"/fpr/uav{i}/diagnostics")])
+        t_d = np.array([_stamp(m) for m in recording.get(f"/fpr/uav{i}/controller_status")])
         stamps = np.array(sorted(_stamp(m) for m in recording.get(f"/fpr/uav{i}/local_state")))
         k = np.searchsorted(stamps, t_d + 1e-9) - 1
         ages[i] = (t_d, np.where(k >= 0, t_d - stamps[np.maximum(k, 0)], np.nan) if len(stamps) else
@@ -108,7 +108,7 @@ def flight():
             "teleop": {"t": record.command.t, "velocity": record.command.velocity, "roll": record.command.roll,
                        "pitch": record.command.pitch, "legs": record.command.legs},
             "status": {i: recording.get(f"/fpr/uav{i}/status") for i in (1, 2, 3)},
-            "diagnostics": {i: recording.get(f"/fpr/uav{i}/diagnostics") for i in (1, 2, 3)},
+            "diagnostics": {i: recording.get(f"/fpr/uav{i}/controller_status") for i in (1, 2, 3)},
             "local_state": {i: recording.get(f"/fpr/uav{i}/local_state") for i in (1, 2, 3)},
             "setpoints": {i: recording.get(f"/fpr/uav{i}/setpoint") for i in (1, 2, 3)},
             "errors": list(swarm.errors), "timeouts_before_land": stats["land_timeouts"],

@@ -74,7 +74,7 @@ def flight(tmp_path_factory):
     yield {"truth": {"t": truth.t, "position": truth.position, "velocity": truth.velocity, "rpy": truth.rpy,
                      "legs": truth.legs, "finite": np.all(np.isfinite(truth.position), axis=1)},
            "wrench": {u.uav_id: {"t": u.wrench_t, "force": u.wrench_force} for u in record.uavs},
-           "diagnostics": {i: recording.get(f"/fpr/uav{i}/diagnostics") for i in (1, 2, 3)},
+           "diagnostics": {i: recording.get(f"/fpr/uav{i}/controller_status") for i in (1, 2, 3)},
            "errors": errors, "n": 3}
 
 

@@ -1,5 +1,7 @@
 """controller node (one per UAV, namespace /fpr/uav<i>): LocalState + ζ_j + teleop -> setpoint, ζ_i, wrench,
-diagnostics at 50 Hz (DESIGN.md §3-§4). The computation is :class:`fpr_control.controller.Controller`.
+controller_status (fpr_msgs/ControllerStatus) at 50 Hz (DESIGN.md §3-§4; DESIGN.md calls that topic
+``diagnostics``: renamed so that the name means the standard message), and its REP-107 health on ``/diagnostics``
+(diagnostic_msgs/DiagnosticArray) once a second. The computation is :class:`fpr_control.controller.Controller`.
 
     ros2 run fpr_control controller --ros-args -r __ns:=/fpr/uav1 -p uav_id:=1 -p mode:=communicating \
         --params-file install/fpr_control/share/fpr_control/config/controller.yaml
@@ -10,6 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from fpr_model.diagnostics import OK, WARN, StatusReport, to_diagnostic_array
 from fpr_model.parameters import default_parameters, load_parameters
 from fpr_model.rotations import quat_to_euler_zyx
 from rclpy.node import Node
@@ -160,7 +164,10 @@ class ControllerNode(Node):
         self.setpoint_pub = self.create_publisher(AttitudeThrustSetpoint, "setpoint", best_effort)
         self.info_pub = self.create_publisher(InformationVector, "/fpr/info", best_effort)
         self.wrench_pub = self.create_publisher(WrenchEstimate, "wrench", best_effort)
-        self.status_pub = self.create_publisher(ControllerStatus, "diagnostics", 10)
+        self.status_pub = self.create_publisher(ControllerStatus, "controller_status", 10)
+        #: REP-107 health once a second on /diagnostics (fpr_model.diagnostics), read by rqt_runtime_monitor/Foxglove
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._next_diagnostics = -math.inf
 
         self._local: LocalEstimate | None = None
         self._local_time = -math.inf
@@ -352,6 +359,30 @@ class ControllerNode(Node):
             st.desired_leg_angles = [float(v) for v in desired.leg_angles]
             st.desired_contact_force = float(desired.contact_force)
         self.status_pub.publish(st)
+        self._publish_diagnostics(out, stamp)
+
+    def _publish_diagnostics(self, out, stamp) -> None:
+        """Once a second (node clock): OK while the configured law runs on fresh inputs; WARN in the NC fallback,
+        while holding without a valid local state, or with a saturated command."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if now < self._next_diagnostics:
+            return
+        self._next_diagnostics = now + 1.0
+        stale = [j + 1 for j, age in enumerate(out.info_ages) if age > self.config.info_timeout]
+        if not (out.local_state_valid or self.controller.uses_ground_truth):
+            level, message = WARN, "no valid local state: holding"
+        elif out.fallback_active:
+            level, message = WARN, f"NC fallback (4.32): no fresh zeta from UAV {', '.join(map(str, stale))}"
+        elif out.thrust_saturated or out.tilt_saturated:
+            level, message = WARN, f"{'thrust' if out.thrust_saturated else 'tilt'} saturated"
+        else:
+            level, message = OK, f"{out.active_mode} law running"
+        report = StatusReport(self.get_fully_qualified_name(), level, message, f"uav{self.config.uav_id}", {
+            "configured mode": self.config.mode, "active mode": out.active_mode,
+            "zeta ages [s]": [float(a) for a in out.info_ages], "local state valid": bool(out.local_state_valid),
+            "thrust saturated": bool(out.thrust_saturated), "tilt saturated": bool(out.tilt_saturated),
+            "loop time [ms]": 1000.0 * float(out.loop_time)})
+        self.diagnostics_pub.publish(to_diagnostic_array([report], stamp))
 
 
 def main(args=None) -> None:

@@ -102,7 +102,7 @@ def test_controller_node_fallback_and_bad_input():
         helper = graph.helper
         setpoints, statuses, wrenches, infos = [], [], [], []
         helper.create_subscription(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", setpoints.append, BEST_EFFORT)
-        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/controller_status", statuses.append, 10)
         helper.create_subscription(WrenchEstimate, "/fpr/uav1/wrench", wrenches.append, BEST_EFFORT)
         helper.create_subscription(InformationVector, "/fpr/info", infos.append, BEST_EFFORT)
         local_pub = helper.create_publisher(LocalState, "/fpr/uav1/local_state", 10)
@@ -166,7 +166,7 @@ def test_controller_node_reports_the_centralized_desired_state():
     try:
         helper = graph.helper
         statuses = []
-        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/controller_status", statuses.append, 10)
         truth_pub = helper.create_publisher(FprState, "/fpr/motion_capture", BEST_EFFORT)
         teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
@@ -269,7 +269,7 @@ def test_controller_node_bounds_teleop_and_refuses_a_second_zeta_publisher():
     try:
         helper = graph.helper
         statuses = []
-        helper.create_subscription(ControllerStatus, "/fpr/uav1/diagnostics", statuses.append, 10)
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/controller_status", statuses.append, 10)
         local_pub = helper.create_publisher(LocalState, "/fpr/uav1/local_state", 10)
         info_pub = helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT)
         teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)

@@ -18,7 +18,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.calibration import CameraModel, EulerZxzPose, VisionCalibration
+from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -113,6 +115,10 @@ class PoseEstimatorNode(Node):
         self._limiter = LogLimiter(self._log_interval)
         self.published = 0
         self._pub = self.create_publisher(LocalState, "local_state", 10)
+        #: REP-107 health once a second on /diagnostics (fpr_model.diagnostics)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._next_diagnostics = -math.inf
+        self._resets_reported = 0
         self.create_subscription(MarkerDetection, "marker", self._on_marker, qos_profile_sensor_data)
         self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)
         self.create_subscription(TwistStamped, "velocity_body", self._on_velocity, qos_profile_sensor_data)
@@ -163,6 +169,7 @@ class PoseEstimatorNode(Node):
         out = self.core.output(now_msg.nanoseconds * 1e-9)
         self._log_events()
         if out is None:
+            self._publish_diagnostics(None, now_msg.to_msg())
             return
         msg = LocalState()
         msg.header.stamp = now_msg.to_msg()
@@ -197,6 +204,36 @@ class PoseEstimatorNode(Node):
         msg.valid = bool(valid)
         self._pub.publish(msg)
         self.published += 1
+        self._publish_diagnostics(msg, msg.header.stamp)
+
+    def _publish_diagnostics(self, state: LocalState | None, stamp) -> None:
+        """REP-107 health on /diagnostics once a second: OK while detections keep the estimate valid; WARN while it
+        coasts on the IMU (no accepted detection for a while) or before the first valid output; ERROR after a
+        filter reset."""
+        now = self._now()
+        if now < self._next_diagnostics:
+            return
+        self._next_diagnostics = now + 1.0
+        core = self.core
+        if core.resets > self._resets_reported:
+            level, message = ERROR, f"filter reset after a non-finite state ({core.resets} so far)"
+        elif state is None:
+            level, message = WARN, (f"not initialised: {core.config.reinit.consistent_detections} consistent "
+                                    f"detections needed ({core.pending_detections} seen)")
+        elif not state.valid:
+            level, message = WARN, "no valid estimate (stale, or no IMU attitude yet)"
+        elif state.detection_age > 0.5:
+            level, message = WARN, f"coasting on the IMU: last accepted detection {state.detection_age:.1f} s ago"
+        else:
+            level, message = OK, "tracking the marker"
+        self._resets_reported = core.resets
+        values = {"accepted detections": core.accepted_detections, "rejected detections": core.rejected_detections,
+                  "initialisations": core.initialisations, "refused inputs": sum(core.refused.values())}
+        if state is not None:
+            values |= {"detection age [s]": float(state.detection_age),
+                       "leg angle [deg]": math.degrees(state.leg_angle)}
+        report = StatusReport(self.get_fully_qualified_name(), level, message, f"uav{self._uav_id}", values)
+        self._diagnostics_pub.publish(to_diagnostic_array([report], stamp))
 
 
 def main(args=None) -> None:

@@ -100,7 +100,7 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
         for name, process in processes.items():
             if not process.ready.wait(max(0.0, deadline - time.monotonic())):
                 raise RuntimeError(f"{name} not ready after {READY_TIMEOUT:.0f} s: {process.lines[-15:]}")
-        expected = {"/fpr/teleop": 1, "/fpr/info": n, **{f"/fpr/uav{i}/diagnostics": 1 for i in range(1, n + 1)}}
+        expected = {"/fpr/teleop": 1, "/fpr/info": n, **{f"/fpr/uav{i}/controller_status": 1 for i in range(1, n + 1)}}
         recorder.wait_for_publishers(expected, timeout=30.0)
         simulator_spec = next(s for s in specs if s.executable == "simulator")
         # every other node runs on simulated time (one /clock subscription each), and so does the recorder; the

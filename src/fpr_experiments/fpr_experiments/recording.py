@@ -14,6 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -63,14 +64,14 @@ def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[T
               Topic("/fpr/teleop", TeleopCommand, True), Topic("/fpr/info", InformationVector, False),
               Topic("/fpr/ground/joy", Joy, True), Topic("/tf", TFMessage, True),
               Topic("/tf_static", TFMessage, True, latched=True),
-              Topic("/robot_description", String, True, latched=True)]
+              Topic("/robot_description", String, True, latched=True), Topic("/diagnostics", DiagnosticArray, True)]
     if pilot:
         topics.append(Topic(PILOT_EVENTS, String, True))
     if target:
         topics.append(Topic("/fpr/target", PoseStamped, False))
     for i in range(1, n + 1):
         ns = f"/fpr/uav{i}"
-        topics += [Topic(f"{ns}/status", UavStatus, True), Topic(f"{ns}/diagnostics", ControllerStatus, True),
+        topics += [Topic(f"{ns}/status", UavStatus, True), Topic(f"{ns}/controller_status", ControllerStatus, True),
                    Topic(f"{ns}/local_state", LocalState, True), Topic(f"{ns}/setpoint", AttitudeThrustSetpoint, False),
                    Topic(f"{ns}/wrench", WrenchEstimate, False), Topic(f"{ns}/marker", MarkerDetection, False),
                    Topic(f"{ns}/imu", Imu, False), Topic(f"{ns}/velocity_body", TwistStamped, False),
@@ -297,7 +298,7 @@ def flight_record(recording: Recording, n: int, **run_info) -> FlightRecord:
     for i in range(1, n + 1):
         ns = f"/fpr/uav{i}"
         st, sv = _series(recording.get(f"{ns}/status"), 1, lambda m: [m.state])
-        dt, dv = _series(recording.get(f"{ns}/diagnostics"), 9 + n, lambda m: [
+        dt, dv = _series(recording.get(f"{ns}/controller_status"), 9 + n, lambda m: [
             m.active_mode, m.fallback_active, *_xyz(m.desired_position), m.desired_roll, m.desired_pitch,
             m.desired_yaw, m.desired_contact_force, *(list(m.desired_leg_angles) or [np.nan] * n)])
         pt, pv = _series(recording.get(f"{ns}/setpoint"), 1, lambda m: [m.thrust])

@@ -57,7 +57,7 @@ def _recording() -> Recording:
                 PILOT_EVENTS: [String(data=json.dumps({"t": 1.25, "event": "task_end", "kind": "goto",
                                                        "success": True}))]}
     for i in range(1, N + 1):
-        messages[f"/fpr/uav{i}/diagnostics"] = [diagnostics]
+        messages[f"/fpr/uav{i}/controller_status"] = [diagnostics]
         messages[f"/fpr/uav{i}/status"] = [status]
     return Recording(messages, {k: [serialize_message(m) for m in v] for k, v in messages.items()},
                      {k: type(v[0]) for k, v in messages.items()})

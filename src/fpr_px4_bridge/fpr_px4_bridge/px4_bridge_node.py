@@ -18,7 +18,9 @@ import threading
 import time
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.battery import thrust_coefficients
+from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
@@ -150,6 +152,12 @@ class Px4BridgeNode(Node):
         self.velocity_pub = self.create_publisher(TwistStamped, "velocity_body", qos_profile_sensor_data)
         self.battery_pub = self.create_publisher(BatteryState, "battery", 10)
         self.status_pub = self.create_publisher(UavStatus, "status", 10)
+        #: REP-107 health once a second on /diagnostics (fpr_model.diagnostics)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._next_diagnostics = -math.inf
+        self._rejected_reported = 0
+        self._state_names = {getattr(UavStatus, name): name[len("STATE_"):] for name in dir(UavStatus)
+                             if name.startswith("STATE_")}
         self.create_timer(1.0 / self.config.stream_rate, self._on_tick)
         self.create_timer(1.0 / float(p["status_rate"]), self._on_status)
 
@@ -225,6 +233,32 @@ class Px4BridgeNode(Node):
         msg.rx_garbage = min(s.rx_garbage, 0xFFFFFFFF)
         msg.rejected_setpoints = min(s.rejected_setpoints, 0xFFFFFFFF)
         self.status_pub.publish(msg)
+        self._publish_diagnostics(msg)
+
+    def _publish_diagnostics(self, status: UavStatus) -> None:
+        """REP-107 health on /diagnostics once a second: ERROR when PX4 is not heard, in FAILSAFE or killed; WARN
+        while arming / warming up / landing or with refused setpoints; OK when idle or in OFFBOARD."""
+        now = status.header.stamp.sec + 1e-9 * status.header.stamp.nanosec
+        if now < self._next_diagnostics:
+            return
+        self._next_diagnostics = now + 1.0
+        state = self._state_names.get(status.state, str(status.state))
+        if not status.connected or status.state in (UavStatus.STATE_FAILSAFE, UavStatus.STATE_KILLED):
+            level = ERROR
+            message = "PX4 not heard" if not status.connected else f"{state} (PX4 {status.mode_name})"
+        elif status.state in (UavStatus.STATE_ARMING, UavStatus.STATE_WARMUP, UavStatus.STATE_LANDING) \
+                or status.rejected_setpoints > self._rejected_reported:
+            level, message = WARN, f"{state} (PX4 {status.mode_name})"
+            if status.rejected_setpoints > self._rejected_reported:
+                message += f", {status.rejected_setpoints - self._rejected_reported} setpoints refused"
+        else:
+            level, message = OK, f"{state} (PX4 {status.mode_name})"
+        self._rejected_reported = status.rejected_setpoints
+        report = StatusReport(self.get_fully_qualified_name(), level, message, f"uav{status.uav_id}", {
+            "state": state, "PX4 mode": status.mode_name, "armed": status.armed, "link age [s]": status.link_age,
+            "setpoint rate [Hz]": status.setpoint_rate, "battery [V]": status.battery_voltage,
+            "garbage frames": status.rx_garbage, "refused setpoints": status.rejected_setpoints})
+        self.diagnostics_pub.publish(to_diagnostic_array([report], status.header.stamp))
 
     def _on_wall_watchdog(self) -> None:
         """Steady clock, 10 Hz (use_sim_time only): no MAVLink frame for ``wall_silence_timeout`` wall seconds ->
@@ -255,7 +289,10 @@ class Px4BridgeNode(Node):
         msg.state = UavStatus.STATE_DISCONNECTED
         msg.connected = False
         msg.link_age = float(silence)
+        msg.mode_name = "unknown"
         self.status_pub.publish(msg)
+        self._next_diagnostics = -math.inf  # say it now, whatever the /clock-driven schedule
+        self._publish_diagnostics(msg)
 
     # ---- reception thread ------------------------------------------------------------------------------
     def _receive_loop(self) -> None:
