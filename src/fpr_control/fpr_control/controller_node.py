@@ -161,9 +161,11 @@ class ControllerNode(Node):
         self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)
         if self.controller.uses_ground_truth:
             self.create_subscription(FprState, motion_capture_topic, self._on_ground_truth, best_effort)
-        self.setpoint_pub = self.create_publisher(AttitudeThrustSetpoint, "setpoint", best_effort)
-        self.info_pub = self.create_publisher(InformationVector, "/fpr/info", best_effort)
-        self.wrench_pub = self.create_publisher(WrenchEstimate, "wrench", best_effort)
+        # publishers reliable (REP-2003: any subscriber can connect); the graph's own subscribers are best effort,
+        # so a lost zeta or setpoint is never retransmitted late: the next one replaces it
+        self.setpoint_pub = self.create_publisher(AttitudeThrustSetpoint, "setpoint", 5)
+        self.info_pub = self.create_publisher(InformationVector, "/fpr/info", 5)
+        self.wrench_pub = self.create_publisher(WrenchEstimate, "wrench", 5)
         self.status_pub = self.create_publisher(ControllerStatus, "controller_status", 10)
         #: REP-107 health once a second on /diagnostics (fpr_model.diagnostics), read by rqt_runtime_monitor/Foxglove
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)

@@ -68,8 +68,9 @@ class ArucoDetectorNode(Node):
         self._camera: CameraModel | None = None
         self.frames = 0
         self.detections = 0
-        self._pub = self.create_publisher(MarkerDetection, "marker", qos_profile_sensor_data)
-        self._debug_pub = self.create_publisher(Image, "marker/debug_image", qos_profile_sensor_data) \
+        # REP-2003: publishers reliable (any subscriber can connect), the subscribers choose the sensor-data profile
+        self._pub = self.create_publisher(MarkerDetection, "marker", 10)
+        self._debug_pub = self.create_publisher(Image, "marker/debug_image", 10) \
             if self._debug else None
         self.create_subscription(CameraInfo, "camera/camera_info", self._on_camera_info, qos_profile_sensor_data)
         self.create_subscription(Image, "camera/image_raw", self._on_image, qos_profile_sensor_data)

@@ -57,7 +57,8 @@ class InfoLinkNode(Node):
             link, seed = scenario.link, scenario.seed
         self.relay = LinkRelay(n, LinkOutage(start, end), link, seed)
         qos = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)  # as the controllers'
-        self.pubs = {j: self.create_publisher(InformationVector, topic, qos)
+        # publishers reliable (REP-2003: any subscriber can connect); the controllers read best effort
+        self.pubs = {j: self.create_publisher(InformationVector, topic, 20)
                      for j, topic in output_topics(pattern, n).items()}
         self.create_subscription(InformationVector, "/fpr/info", self._on_info, qos)
         if self.get_parameter("use_sim_time").value:

@@ -26,7 +26,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, Imu
 
@@ -148,8 +148,10 @@ class Px4BridgeNode(Node):
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint, best_effort)
         self.create_subscription(TeleopCommand, p["teleop_topic"], self._on_teleop, best_effort)
-        self.imu_pub = self.create_publisher(Imu, "imu", qos_profile_sensor_data)
-        self.velocity_pub = self.create_publisher(TwistStamped, "velocity_body", qos_profile_sensor_data)
+        # REP-2003: sensor publishers reliable (the system default), so that any subscriber can connect; the
+        # subscribers (pose_estimator, controller) use the sensor-data profile
+        self.imu_pub = self.create_publisher(Imu, "imu", 10)
+        self.velocity_pub = self.create_publisher(TwistStamped, "velocity_body", 10)
         self.battery_pub = self.create_publisher(BatteryState, "battery", 10)
         self.status_pub = self.create_publisher(UavStatus, "status", 10)
         #: REP-107 health once a second on /diagnostics (fpr_model.diagnostics)

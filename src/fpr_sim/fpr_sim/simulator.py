@@ -9,7 +9,7 @@ stamped at its exposure instant and published ``cameras.latency`` later (the fir
 an exact copy of the ground truth published with it unless ``motion_capture.enabled``), and,
 when the scenario enables ``target``, ``/fpr/target`` (geometry_msgs/PoseStamped, frame ``flat_platform``, at
 ``target.rate``): the noisy relative pose of the target of fpr_sim.target (thesis §4.4.2, (4.39)). Camera and
-target topics use the sensor-data QoS.
+target topics are published reliable (REP-2003: any subscriber can connect; readers pick the sensor-data QoS).
 
 For RViz and Foxglove: ``/tf`` (tf2_msgs/TFMessage, ``tf_rate``, default 50 Hz, 0 = off: world -> platform ->
 leg<i> -> uav<i>/base_link from the ground truth, fpr_sim.tf_tree), ``/tf_static`` (each UAV's true camera mounting,
@@ -29,7 +29,7 @@ from fpr_px4_bridge.link import load_signing_key
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, TransformStamped, Vector3
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
@@ -49,6 +49,11 @@ from fpr_sim.tf_tree import FrameTransform, camera_transforms, robot_transforms
 def _stamp(t: float) -> Time:
     sec = int(t)
     return Time(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+
+
+#: REP-2003: sensor data is published with the system default profile (reliable, volatile), so that any subscriber
+#: can connect; subscribers that prefer dropping to retransmitting (estimators, detectors) use the sensor-data profile
+SENSOR_PUBLISHER_QOS = 10
 
 
 def _pose(position, quat_wxyz) -> Pose:
@@ -128,15 +133,15 @@ class SimulatorNode(Node):
         for i in range(1, self.sim.n + 1):
             if self.emulated:
                 self.marker_pubs.append(self.create_publisher(MarkerDetection, f"/fpr/uav{i}/marker",
-                                                              qos_profile_sensor_data))
+                                                              SENSOR_PUBLISHER_QOS))
             else:
                 self.image_pubs.append(self.create_publisher(Image, f"/fpr/uav{i}/camera/image_raw",
-                                                             qos_profile_sensor_data))
+                                                             SENSOR_PUBLISHER_QOS))
                 self.info_pubs.append(self.create_publisher(CameraInfo, f"/fpr/uav{i}/camera/camera_info",
-                                                            qos_profile_sensor_data))
+                                                            SENSOR_PUBLISHER_QOS))
         self.target = (TargetEmulator(self.scenario.target, self.scenario.seed) if self.scenario.target.enabled
                        else None)
-        self.target_pub = (self.create_publisher(PoseStamped, "/fpr/target", qos_profile_sensor_data)
+        self.target_pub = (self.create_publisher(PoseStamped, "/fpr/target", SENSOR_PUBLISHER_QOS)
                            if self.target is not None else None)
         self.target_period = 1.0 / self.scenario.target.rate
         self._next_target = 0.0
