@@ -29,13 +29,15 @@ CASES = {
     "n6_emulated": (6, "n6_unequal", "steps_roll_legs", "emulated"),
     "n6_images": (6, "n6_unequal", "steps_roll_legs", "images"),
 }
-#: lever -> (deterministic runner, lean nodes, /clock rate [Hz]); the first is the baseline (main before)
-LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0),
-          "threaded, lean nodes": (False, True, 250.0),
-          "threaded, /clock 100 Hz": (False, False, 100.0),
-          "threaded, lean + /clock 100 Hz": (False, True, 100.0),
-          "deterministic, full nodes, /clock 250 Hz": (True, False, 250.0),
-          "deterministic, lean + /clock 100 Hz (default)": (True, True, 100.0)}
+#: lever -> (deterministic runner, lean nodes, /clock rate [Hz], realism profile); the first is the baseline
+#: (main before); the last two compare the realism profiles on the default runner (issue 11: hardware <= 20 % cost)
+LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal"),
+          "threaded, lean nodes": (False, True, 250.0, "ideal"),
+          "threaded, /clock 100 Hz": (False, False, 100.0, "ideal"),
+          "threaded, lean + /clock 100 Hz": (False, True, 100.0, "ideal"),
+          "deterministic, full nodes, /clock 250 Hz": (True, False, 250.0, "ideal"),
+          "deterministic, lean + /clock 100 Hz, ideal": (True, True, 100.0, "ideal"),
+          "deterministic, lean + /clock 100 Hz, hardware (default)": (True, True, 100.0, "hardware")}
 
 
 def _cpu() -> float:
@@ -55,7 +57,8 @@ def _entities(graph: InProcessGraph) -> int:
     return total
 
 
-def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float) -> dict:
+def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
+             realism: str = "ideal") -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -63,7 +66,7 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
 
         model = {"controller": {"model_file": MODELS.resolve(f"fpr_n{n}_unequal")}}
     options = GraphOptions(n=n, mode="communicating", cameras=cameras, scenario=scenario, script=script,
-                           parameters={"simulator": {"clock_rate": clock_rate}, **model})
+                           parameters={"simulator": {"clock_rate": clock_rate}, **model}, realism=realism)
     load_before = os.getloadavg()[0]
     with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean,
                         deterministic=deterministic) as graph:
@@ -92,10 +95,10 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}", flush=True)
     for case in args.cases.split(","):
         baseline = None
-        for name, (deterministic, lean, clock_rate) in levers:
-            r = run_case(case, deterministic, lean, clock_rate, args.seconds)
+        for name, (deterministic, lean, clock_rate, realism) in levers:
+            r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism)
             baseline = baseline or r
-            print(f"{case:12s} {name:46s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
+            print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
                   flush=True)

@@ -47,10 +47,9 @@ from typing import Any
 
 from fpr_experiments.resources import EXPERIMENTS, JOY_SCRIPTS, SCENARIOS, UnknownNameError
 
-#: the realism profile of an experiment that names none (fpr_sim.scenario.realism_profiles). The goal of issue 11
-#: is "hardware" for every experiment; it stays "ideal" until the hardware profile is calibrated: switching is
-#: this one line.
-DEFAULT_REALISM = "ideal"
+#: the realism profile of an experiment that names none (fpr_sim.scenario.realism_profiles): "hardware", calibrated
+#: on Table 3.2's impedance row and Table 4.2's C row only (fpr_experiments.calibration, docs/calibration.md)
+DEFAULT_REALISM = "hardware"
 
 #: every experiment must keep these (DESIGN.md §5b): no flip, no fly-away, no crash, no NaN
 DEFAULT_CHECKS: dict[str, dict[str, float]] = {

@@ -82,3 +82,11 @@ def test_markdown_names_the_calibration_set_and_every_evaluation():
         assert f"`{experiment}` / `{variant}`" in text
     assert "×0.1" in text and "×0.9" in text and "**best**" in text
     assert "a: 1.0" in text   # the chosen values, as written to 90_calibrated.yaml
+
+
+def test_only_safety_checks_disqualify():
+    from fpr_experiments.calibration import safety_failures
+
+    failed = ["roll_rmse_deg = 5.2 (<= 5): FAILED", "ground_contacts = 1 (<= 0): FAILED",
+              "uav1.detection_rate_pct = 40 (>= 50): FAILED", "max_abs_roll_deg = 45 (<= 30): FAILED"]
+    assert safety_failures(failed) == ["ground_contacts = 1 (<= 0): FAILED", "max_abs_roll_deg = 45 (<= 30): FAILED"]
