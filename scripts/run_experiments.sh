@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Set the workspace up if needed, then run thesis experiments under the network isolation of DESIGN.md §6:
-#   bash scripts/run_experiments.sh all            # every experiment, full durations; writes docs/results.md
+#   bash scripts/run_experiments.sh all --jobs 2   # every experiment, full durations, 2 at a time; writes docs/results.md
 #   bash scripts/run_experiments.sh table_3_4      # one experiment (reports/table_3_4/)
 #   bash scripts/run_experiments.sh list           # what there is
 # Arguments after the name go to `ros2 run fpr_experiments run` (--quick, --seed S, --cameras images|emulated,
-# --processes, --variant V, ...). `all` takes about an hour on 2 cores; run it on a quiet machine.
+# --processes, --variant V, --jobs N, ...). `all` takes about an hour on one core (--jobs 2: about 35 min); run it on a
+# quiet machine.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"

@@ -42,6 +42,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--report-only", action="store_true",
                         help="with 'all': rebuild results.md from the reports' metrics.json, fly nothing")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="with 'all': experiments flown in parallel, each in its own isolated process (its own "
+                             "network namespace and ROS domain; 2 cores: 2); default 1")
     return parser
 
 
@@ -52,7 +55,15 @@ def _results_path(args) -> str:
 
 
 def _command_line(args) -> str:
-    parts = ["ros2 run fpr_experiments run all"]
+    parts = ["ros2 run fpr_experiments run all", *_experiment_flags(args)]
+    if args.jobs > 1:
+        parts.append(f"--jobs {args.jobs}")
+    return " ".join(parts)
+
+
+def _experiment_flags(args) -> list[str]:
+    """The options of ``run all`` that each experiment's run takes too (results.md's command line, --jobs)."""
+    parts = []
     if args.quick:
         parts.append("--quick")
     if args.seed is not None:
@@ -63,7 +74,7 @@ def _command_line(args) -> str:
         parts.append(f"--realism {args.realism}")
     if args.processes:
         parts.append("--processes")
-    return " ".join(parts)
+    return [token for part in parts for token in part.split(" ")]
 
 
 def _write_results(names: list[str], output_root: str, path: str, command: str) -> str:
@@ -92,6 +103,51 @@ def _write_results(names: list[str], output_root: str, path: str, command: str) 
     return path
 
 
+def _flight_seconds(experiment) -> float:
+    """Simulated seconds an experiment flies (all its variants): the order of the parallel queue, longest first."""
+    return sum(v.duration or experiment.duration for v in experiment.variants)
+
+
+def _run_parallel(experiments: list, args, output_root: str) -> list[str]:
+    """``run all --jobs N``: each experiment in its own ``scripts/isolated.sh ros2 run fpr_experiments run <name>``
+    (its own network namespace: no shared port or DDS domain), N at a time, longest first; one line per start and
+    end; returns the experiments whose checks failed. The reports land where a sequential run puts them."""
+    import subprocess
+
+    root = os.environ.get("FPR_ROOT") or os.getcwd()
+    isolated = os.path.join(root, "scripts", "isolated.sh")
+    flags = _experiment_flags(args) + (["--no-plots"] if args.no_plots else []) \
+        + (["--real-time-factor", str(args.real_time_factor)] if args.processes else [])
+    queue = sorted(experiments, key=_flight_seconds, reverse=True)
+    running: dict[str, tuple[subprocess.Popen, object]] = {}
+    failed, started, done = [], time.monotonic(), 0
+    log_dir = os.path.join(output_root, "_logs")
+    os.makedirs(log_dir, exist_ok=True)
+    while queue or running:
+        while queue and len(running) < args.jobs:
+            experiment = queue.pop(0)
+            log = open(os.path.join(log_dir, f"{experiment.id}.log"), "w", encoding="utf-8")  # noqa: SIM115
+            env = dict(os.environ, FPR_IN_NETNS="0", ROS_DOMAIN_ID=str(1 + (len(running) + done) % 100))
+            command = ["bash", isolated, "ros2", "run", "fpr_experiments", "run", experiment.id, "--output-dir",
+                       output_root, *flags]
+            running[experiment.id] = (subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env), log)
+            print(f"[all] start {experiment.id} ({_flight_seconds(experiment):.0f} s simulated; log {log.name})",
+                  flush=True)
+        time.sleep(1.0)
+        for name, (process, log) in list(running.items()):
+            if process.poll() is None:
+                continue
+            log.close()
+            del running[name]
+            done += 1
+            if process.returncode != 0:
+                failed.append(name)
+            verdict = {0: "checks passed", 1: "checks FAILED"}.get(process.returncode, f"exit {process.returncode}")
+            print(f"[all] {done}/{len(experiments)} {name}: {verdict} ({time.monotonic() - started:.0f} s)",
+                  flush=True)
+    return failed
+
+
 def run_main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     from fpr_experiments.catalog import experiment_names
@@ -109,9 +165,12 @@ def run_main(argv: list[str] | None = None) -> int:
 
         if args.realism is not None:
             check_realism(args.realism, "--realism")
-        for name in names:
-            load_experiment(name)  # every name and file checked before anything flies
+        experiments = [load_experiment(name) for name in names]  # every name and file checked before anything flies
         start, status, failed = time.monotonic(), 0, []
+        if args.name == "all" and args.jobs > 1:
+            failed = _run_parallel(experiments, args, output_root)
+            status = 1 if failed else 0
+            names = []
         for k, name in enumerate(names):
             if len(names) > 1:
                 print(f"\n===== [{k + 1}/{len(names)}] {name} ({time.monotonic() - start:.0f} s so far) =====",
@@ -124,6 +183,7 @@ def run_main(argv: list[str] | None = None) -> int:
                 status = 1
                 failed.append(name)
         if args.name == "all":
+            names = [e.id for e in experiments]
             path = _write_results(names, output_root, _results_path(args), _command_line(args))
             print(f"\nwrote {path}; {len(names)} experiments in {time.monotonic() - start:.0f} s"
                   + (f"; checks failed in: {', '.join(failed)}" if failed else "; every check passed"), flush=True)

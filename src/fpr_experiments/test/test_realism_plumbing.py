@@ -82,3 +82,36 @@ def test_realism_summary_states_the_plant_draws():
     draws = hardware["plant_draws"]
     assert draws["mismatch"] and len(draws["thrust_coefficients"]) == 3
     assert realism_summary(load_scenario("hover"))["plant_draws"] == {}
+
+
+def test_run_all_jobs_runs_each_experiment_isolated_longest_first(monkeypatch, tmp_path):
+    """``run all --jobs 2``: one isolated process per experiment, longest flight first, failures collected."""
+    from types import SimpleNamespace
+
+    import fpr_experiments.cli as cli
+
+    started = []
+
+    class FakeProcess:
+        def __init__(self, command, stdout, stderr, env):
+            started.append((command, env))
+            self.returncode = 1 if command[6] == "short" else 0
+
+        def poll(self):
+            return self.returncode
+
+    import subprocess
+
+    monkeypatch.setattr(subprocess, "Popen", FakeProcess)
+    monkeypatch.setattr(cli.time, "sleep", lambda _s: None)
+    experiments = [SimpleNamespace(id=name, duration=d, variants=[SimpleNamespace(duration=0.0)] * k)
+                   for name, d, k in (("short", 10.0, 1), ("long", 50.0, 3), ("mid", 40.0, 1))]
+    args = cli._parser().parse_args(["all", "--jobs", "2", "--seed", "3", "--realism", "ideal"])
+    failed = cli._run_parallel(experiments, args, str(tmp_path))
+    assert [c[6] for c, _ in started] == ["long", "mid", "short"]
+    for command, env in started:
+        assert command[1].endswith("scripts/isolated.sh") and env["FPR_IN_NETNS"] == "0"
+        assert command[7:] == ["--output-dir", str(tmp_path), "--seed", "3", "--realism", "ideal"]
+    assert len({env["ROS_DOMAIN_ID"] for _, env in started}) == 3
+    assert failed == ["short"]
+    assert cli._command_line(args) == "ros2 run fpr_experiments run all --seed 3 --realism ideal --jobs 2"
