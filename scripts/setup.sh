@@ -57,7 +57,7 @@ for pkg in "$ROOT"/vendor/*/; do
     vendor_paths+=("vendor/$name")
   fi
 done
-src_hash=$(cd "$ROOT" && { find src vendor colcon.meta -type f -not -path '*/__pycache__/*' -not -name '*.pyc' | LC_ALL=C sort;
+src_hash=$(cd "$ROOT" && { find src vendor colcon.meta -type f -not -path '*/__pycache__/*' -not -name '*.pyc' -not -name '*.so' | LC_ALL=C sort;
   find src vendor colcon.meta -type f \( -name package.xml -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt \
     -o -name '*.msg' -o -name '*.yaml' -o -name '*.c' -o -name colcon.meta \) -print0 | LC_ALL=C sort -z | xargs -0 cat;
   echo "${vendor_paths[*]}"; } | sha256sum | cut -d' ' -f1)
