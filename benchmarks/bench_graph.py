@@ -36,8 +36,8 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal"),
           "threaded, /clock 100 Hz": (False, False, 100.0, "ideal"),
           "threaded, lean + /clock 100 Hz": (False, True, 100.0, "ideal"),
           "deterministic, full nodes, /clock 250 Hz": (True, False, 250.0, "ideal"),
-          "deterministic, lean + /clock 100 Hz, ideal": (True, True, 100.0, "ideal"),
-          "deterministic, lean + /clock 100 Hz, hardware (default)": (True, True, 100.0, "hardware")}
+          "deterministic, lean + /clock 100 Hz (default)": (True, True, 100.0, "ideal"),
+          "deterministic, lean + /clock 100 Hz, hardware realism": (True, True, 100.0, "hardware")}
 
 
 def _cpu() -> float:
