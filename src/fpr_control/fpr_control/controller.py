@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from fpr_model._math import norm_floats
@@ -254,6 +254,26 @@ class Controller:
         self._hold_command: TeleopReference | None = None
         self._previous_active = config.mode
         self._observer_paused = False
+
+    #: ControllerConfig fields :meth:`reconfigure` may change in flight (ROS parameters set at run time)
+    DYNAMIC_FIELDS = ("gains", "max_thrust", "max_tilt", "info_timeout")
+
+    def reconfigure(self, **changes) -> None:
+        """Apply run-time changes of :data:`DYNAMIC_FIELDS` (the node's dynamic parameters): the new config is
+        validated as a whole first (ControllerConfig raises ValueError, nothing changes), then the next
+        :meth:`step` uses it. New gains replace the motion laws' gains (the PID keeps its integral state, clamped to
+        the new bound on the next step); the observer's gains are not dynamic (its state was built with them)."""
+        unknown = sorted(set(changes) - set(self.DYNAMIC_FIELDS))
+        if unknown:
+            raise ValueError(f"not changeable in flight: {unknown} (dynamic: {self.DYNAMIC_FIELDS})")
+        config = replace(self.config, **changes)
+        if config.gains.observer != self.config.gains.observer:
+            raise ValueError("the observer gains are not changeable in flight")
+        self.config = config
+        self.information.timeout = config.info_timeout
+        gains = config.gains
+        self.pid.gains = gains.pid_centralized if self.uses_ground_truth else gains.pid_decentralized
+        self.impedance_gains = gains.impedance_centralized if self.uses_ground_truth else gains.impedance_decentralized
 
     # ------------------------------------------------------------------------------------------------
     def receive_info(self, info: PeerInfo, now: float, sequence: int | None = None, valid: bool = True) -> str | None:

@@ -10,10 +10,12 @@ controller_status (fpr_msgs/ControllerStatus) at 50 Hz (DESIGN.md §3-§4; DESIG
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.diagnostics import OK, WARN, StatusReport, to_diagnostic_array
+from fpr_model.node_parameters import NodeParameters, Param
 from fpr_model.parameters import default_parameters, load_parameters
 from fpr_model.rotations import quat_to_euler_zyx
 from rclpy.node import Node
@@ -23,14 +25,18 @@ from sensor_msgs.msg import Imu
 from fpr_control.command_limits import CommandLimits, bound_command
 from fpr_control.controller import (
     DEFAULT_GAINS,
+    IMPEDANCE_FORCE_INPUTS,
     MODE_CODES,
+    MODES,
+    STATE_SOURCES,
     Controller,
     ControllerConfig,
     GroundTruth,
     gains_from_dict,
 )
 from fpr_control.information import InfoPlausibility, LocalEstimate, PeerInfo
-from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
+from fpr_control.node_utils import LOG_THROTTLE_S, spin_node
+from fpr_control.observers import OBSERVER_KINDS
 from fpr_control.reference import TeleopReference
 from fpr_msgs.msg import (
     AttitudeThrustSetpoint,
@@ -54,76 +60,120 @@ def _vec(v) -> np.ndarray:
 class ControllerNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__("controller", **node_kwargs)
-        d = self.declare_parameter
-        uav_id = d("uav_id", 1, describe("this UAV's id i (1-based)")).value
-        n = d("n", 3, describe("number of UAVs / legs")).value
-        mode = d("mode", "communicating", describe(
-            "centralized | communicating | non_communicating | impedance | pd | pd_compensated")).value
-        observer = d("observer", "fowo", describe("wrench observer: fowo | sowo | smwo")).value
-        state_source = d("state_source", "local", describe(
+        table = NodeParameters(self)
+        self.parameters = table
+
+        def d(name: str, default, text: str, **kw):
+            return table.declare(name, Param(default, text, **kw))
+
+        def dyn(name: str, default, text: str, apply, check=None, **kw):
+            return table.declare(name, Param(default, text, dynamic=True, **kw), apply=apply, check=check)
+
+        uav_id = d("uav_id", 1, "this UAV's id i (1-based)", low=1, high=64)
+        n = d("n", 3, "number of UAVs / legs", low=3, high=64)
+        mode = d("mode", "communicating", "control law", choices=MODES)
+        observer = d("observer", "fowo", "wrench observer", choices=OBSERVER_KINDS)
+        state_source = d("state_source", "local", (
             "local (LocalState + peers' zeta) or ground_truth (motion capture on motion_capture_topic, F0; implied by "
-            "centralized)")).value
-        motion_capture_topic = d("motion_capture_topic", "/fpr/motion_capture", describe(
+            "centralized)"), choices=STATE_SOURCES)
+        motion_capture_topic = d("motion_capture_topic", "/fpr/motion_capture", (
             "fpr_msgs/FprState the ground-truth modes fly on: the simulator's (or a MOCAP bridge's) motion capture; "
-            "/fpr/ground_truth is the simulator's exact truth")).value
-        rate = d("rate", 50.0, describe("control rate [Hz]")).value
-        info_timeout = d("info_timeout", 0.2, describe("[s] a peer's zeta older than this -> fallback to NC")).value
-        max_thrust = d("max_thrust", 25.0, describe("f_max [N]: thrust saturation")).value
-        max_tilt_deg = d("max_tilt_deg", 35.0, describe("[deg] tilt limit of the thrust direction")).value
-        force_input = d("impedance_force_input", "interaction", describe(
+            "/fpr/ground_truth is the simulator's exact truth"))
+        rate = d("rate", 50.0, "control rate [Hz]", low=1.0, high=1000.0)
+        info_timeout = dyn("info_timeout", 0.2, "[s] a peer's zeta older than this -> fallback to NC",
+                           lambda v: self.controller.reconfigure(info_timeout=v), low=0.001, high=10.0)
+        max_thrust = dyn("max_thrust", 25.0, "f_max [N]: thrust saturation of the setpoint",
+                         lambda v: self.controller.reconfigure(max_thrust=v), low=0.1, high=100.0)
+        max_tilt_deg = dyn("max_tilt_deg", 35.0, "[deg] tilt limit of the thrust direction",
+                           lambda v: self.controller.reconfigure(max_tilt=math.radians(v)), low=1.0, high=89.0)
+        force_input = d("impedance_force_input", "interaction", (
             "decentralized impedance: estimated platform force entering (4.34) as epsilon_tau: 'interaction' (along "
             "the desired contact force only; a load is compensated) or 'full' (the printed law: a load drifts the "
-            "robot at f_e / B^d)")).value
-        self.local_timeout = d("local_state_timeout", 0.5, describe("[s] LocalState older -> invalid")).value
-        self.imu_timeout = d("imu_timeout", 0.5, describe("[s] IMU older -> yaw from LocalState.uav_yaw")).value
-        self.teleop_timeout = d("teleop_timeout", 1.0, describe(
-            "[s] no TeleopCommand for this long -> zero velocities, hold the rest")).value
-        model_file = d("model_file", "", describe("FprParameters YAML (empty: thesis Table B.1 defaults)")).value
-        info_input_topic = d("info_input_topic", "/fpr/info", describe(
+            "robot at f_e / B^d)"), choices=IMPEDANCE_FORCE_INPUTS)
+
+        def set_attribute(attribute: str):
+            return lambda v: setattr(self, attribute, float(v))
+
+        self.local_timeout = dyn("local_state_timeout", 0.5, "[s] LocalState older -> invalid",
+                                 set_attribute("local_timeout"), low=0.001, high=10.0)
+        self.imu_timeout = dyn("imu_timeout", 0.5, "[s] IMU older -> yaw from LocalState.uav_yaw",
+                               set_attribute("imu_timeout"), low=0.001, high=10.0)
+        self.teleop_timeout = dyn("teleop_timeout", 1.0, "[s] no TeleopCommand for this long -> zero velocities, "
+                                  "hold the rest", set_attribute("teleop_timeout"), low=0.01, high=60.0)
+        model_file = d("model_file", "", "FprParameters YAML (empty: thesis Table B.1 defaults)")
+        info_input_topic = d("info_input_topic", "/fpr/info", (
             "topic the peers' zeta_j are read from (the own zeta_i is always published on /fpr/info); set it to "
-            "a relay's output to inject communication faults (fpr_experiments info_link)")).value
-        # bounded inputs (issue 12): the controller's own limits on /fpr/teleop (fpr_control.command_limits)
+            "a relay's output to inject communication faults (fpr_experiments info_link)"))
+        # bounded inputs (issue 12): the controller's own limits on /fpr/teleop (fpr_control.command_limits); dynamic:
+        # a set is validated as a whole CommandLimits (e.g. leg_angle_min < leg_angle_max) before it applies
         lim = CommandLimits()
+
+        def limit(name: str, field_name: str, default: float, text: str, to_si=float, **kw) -> float:
+            def candidate(v) -> CommandLimits:
+                return replace(self.command_limits, **{field_name: to_si(v)})
+
+            def check(v) -> str | None:
+                try:
+                    candidate(v)
+                except ValueError as error:
+                    return f"{name} = {v}: {error}"
+                return None
+
+            def apply(v) -> None:
+                self.command_limits = candidate(v)
+
+            return to_si(dyn(name, default, text, apply, check, **kw))
+
         self.command_limits = CommandLimits(
-            leg_angle_min=math.radians(d("command_leg_angle_min_deg", math.degrees(lim.leg_angle_min), describe(
-                "[deg] commanded leg angles below are clamped to it (default: the teleop's 15 deg)")).value),
-            leg_angle_max=math.radians(d("command_leg_angle_max_deg", math.degrees(lim.leg_angle_max), describe(
-                "[deg] commanded leg angles above are clamped to it (default: the teleop's 80 deg)")).value),
-            leg_stop_min=math.radians(d("command_leg_stop_min_deg", math.degrees(lim.leg_stop_min), describe(
-                "[deg] joint stop: a command with a leg angle below is refused, in [0, leg_angle_min]")).value),
-            leg_stop_max=math.radians(d("command_leg_stop_max_deg", math.degrees(lim.leg_stop_max), describe(
-                "[deg] joint stop: a command with a leg angle above is refused, in [leg_angle_max, 180]")).value),
-            max_tilt=math.radians(d("command_max_tilt_deg", math.degrees(lim.max_tilt), describe(
-                "[deg] |roll|, |pitch| limit of the command, in (0, 90); default 30 (teleop_tilt30)")).value),
-            max_speed=d("command_max_speed", lim.max_speed, describe(
-                "[m/s] |platform velocity| limit (F_Fp), > 0")).value,
-            max_yaw_rate=d("command_max_yaw_rate", lim.max_yaw_rate, describe("[rad/s] |yaw rate| limit")).value,
-            max_tilt_rate=d("command_max_tilt_rate", lim.max_tilt_rate, describe(
-                "[rad/s] |roll rate|, |pitch rate| limit")).value,
-            max_leg_rate=d("command_max_leg_rate", lim.max_leg_rate, describe("[rad/s] |leg rate| limit")).value,
-            max_acceleration=d("command_max_acceleration", lim.max_acceleration, describe(
-                "[m/s^2] |platform acceleration| limit (F_Fp)")).value,
-            max_yaw_acceleration=d("command_max_yaw_acceleration", lim.max_yaw_acceleration, describe(
-                "[rad/s^2] |yaw acceleration| limit")).value,
-            max_contact_force=d("command_max_contact_force", lim.max_contact_force, describe(
-                "[N] contact force limit: [0, this] passes, [-this, refuse_ratio x this] is clamped")).value,
-            refuse_ratio=d("command_refuse_ratio", lim.refuse_ratio, describe(
-                "in [1, 10]: a value beyond this x its symmetric limit refuses the whole command (the last valid "
-                "one is kept); between the limit and this x the limit it is clamped")).value)
+            leg_angle_min=limit("command_leg_angle_min_deg", "leg_angle_min", math.degrees(lim.leg_angle_min),
+                                "[deg] commanded leg angles below are clamped to it (default: the teleop's 15 deg)",
+                                math.radians, high=180.0),
+            leg_angle_max=limit("command_leg_angle_max_deg", "leg_angle_max", math.degrees(lim.leg_angle_max),
+                                "[deg] commanded leg angles above are clamped to it (default: the teleop's 80 deg)",
+                                math.radians, high=180.0),
+            leg_stop_min=limit("command_leg_stop_min_deg", "leg_stop_min", math.degrees(lim.leg_stop_min),
+                               "[deg] joint stop: a command with a leg angle below is refused, in [0, leg_angle_min]",
+                               math.radians, high=180.0),
+            leg_stop_max=limit("command_leg_stop_max_deg", "leg_stop_max", math.degrees(lim.leg_stop_max),
+                               "[deg] joint stop: a command with a leg angle above is refused, in "
+                               "[leg_angle_max, 180]", math.radians, high=180.0),
+            max_tilt=limit("command_max_tilt_deg", "max_tilt", math.degrees(lim.max_tilt),
+                           "[deg] |roll|, |pitch| limit of the command; default 30 (teleop_tilt30)", math.radians,
+                           low=0.1, high=89.0),
+            max_speed=limit("command_max_speed", "max_speed", lim.max_speed,
+                            "[m/s] |platform velocity| limit (F_Fp)", low=0.01, high=20.0),
+            max_yaw_rate=limit("command_max_yaw_rate", "max_yaw_rate", lim.max_yaw_rate, "[rad/s] |yaw rate| limit",
+                               low=0.01, high=10.0),
+            max_tilt_rate=limit("command_max_tilt_rate", "max_tilt_rate", lim.max_tilt_rate,
+                                "[rad/s] |roll rate|, |pitch rate| limit", low=0.01, high=10.0),
+            max_leg_rate=limit("command_max_leg_rate", "max_leg_rate", lim.max_leg_rate, "[rad/s] |leg rate| limit",
+                               low=0.01, high=10.0),
+            max_acceleration=limit("command_max_acceleration", "max_acceleration", lim.max_acceleration,
+                                   "[m/s^2] |platform acceleration| limit (F_Fp)", low=0.01, high=50.0),
+            max_yaw_acceleration=limit("command_max_yaw_acceleration", "max_yaw_acceleration",
+                                       lim.max_yaw_acceleration, "[rad/s^2] |yaw acceleration| limit",
+                                       low=0.01, high=50.0),
+            max_contact_force=limit("command_max_contact_force", "max_contact_force", lim.max_contact_force,
+                                    "[N] contact force limit: [0, this] passes, [-this, refuse_ratio x this] is "
+                                    "clamped", low=0.01, high=200.0),
+            refuse_ratio=limit("command_refuse_ratio", "refuse_ratio", lim.refuse_ratio,
+                               "a value beyond this x its symmetric limit refuses the whole command (the last valid "
+                               "one is kept); between the limit and this x the limit it is clamped", low=1.0,
+                               high=10.0))
         self._teleop_refused = 0  #: consecutive refused TeleopCommands (announced on return)
         # zeta_j plausibility and one publisher per uav_id (issue 12; fpr_control.information)
         ip = InfoPlausibility()
 
-        def info_bound(name: str, default: float, text: str) -> float:
-            return float(d(name, float(default), describe(text)).value)
+        def info_bound(name: str, default: float, text: str, **kw) -> float:
+            return float(d(name, float(default), text, **kw))
 
         plausibility = InfoPlausibility(
             leg_angle_min=math.radians(info_bound("info_leg_angle_min_deg", math.degrees(ip.leg_angle_min),
                                                   "[deg] a zeta_j with a leg angle below is refused (joint stop "
-                                                  "10 deg - 3 deg), >= 0")),
+                                                  "10 deg - 3 deg)", high=180.0)),
             leg_angle_max=math.radians(info_bound("info_leg_angle_max_deg", math.degrees(ip.leg_angle_max),
                                                   "[deg] a zeta_j with a leg angle above is refused (the model's "
-                                                  "domain (0, 90])")),
+                                                  "domain (0, 90])", high=180.0)),
             max_speed=info_bound("info_max_speed", ip.max_speed, "[m/s] a zeta_j with |Fp v_j| above is refused"),
             max_thrust=info_bound("info_max_thrust", ip.max_thrust, "[N] a zeta_j with a thrust above is refused"),
             max_leg_rate=info_bound("info_max_leg_rate", ip.max_leg_rate, "[rad/s] refuse a zeta_j whose leg angle "
@@ -133,14 +183,41 @@ class ControllerNode(Node):
             max_acceleration=info_bound("info_max_acceleration", ip.max_acceleration, "[m/s^2] refuse a zeta_j "
                                         "whose velocity jumps more than this x dt + 1 m/s from the last accepted"),
             publisher_timeout=info_bound("info_publisher_timeout", ip.publisher_timeout, "[s] a uav_id's "
-                                         "established zeta publisher silent this long may be replaced (> 0)"))
+                                         "established zeta publisher silent this long may be replaced", low=0.001))
         own_writer_direct = info_input_topic == "/fpr/info"
-        gains = {}
+        # gains: one parameter per leaf of DEFAULT_GAINS; the motion laws' gains are dynamic (validated by building
+        # the whole ControllerGains first), the observer's are read-only (its state was built with them)
+        self._gains_values: dict[str, dict] = {}
+
+        def gain_parameter(group: str, name: str, default):
+            leaf = f"gains.{group}.{name}"
+            if group == "observer":
+                return d(leaf, default, f"{group} gain {name}")
+
+            def candidate(v):
+                values = {g: dict(leaves) for g, leaves in self._gains_values.items()}
+                values[group][name] = list(v) if isinstance(v, (list, tuple)) else v
+                return values, gains_from_dict(values, self.n)
+
+            def check(v) -> str | None:
+                try:
+                    candidate(v)
+                except (ValueError, TypeError) as error:
+                    return f"{leaf} = {v}: {error}"
+                return None
+
+            def apply(v) -> None:
+                self._gains_values, gains = candidate(v)
+                self.controller.reconfigure(gains=gains)
+
+            return dyn(leaf, default, f"{group} gain {name}", apply, check)
+
         for group, values in DEFAULT_GAINS.items():
-            gains[group] = {}
+            self._gains_values[group] = {}
             for name, default in values.items():
-                value = d(f"gains.{group}.{name}", default, describe(f"{group} gain {name}")).value
-                gains[group][name] = list(value) if isinstance(value, (list, tuple)) else value
+                value = gain_parameter(group, name, default)
+                self._gains_values[group][name] = list(value) if isinstance(value, (list, tuple)) else value
+        gains = self._gains_values
 
         params = load_parameters(model_file) if model_file else default_parameters(int(n))
         if params.n != n:

@@ -9,11 +9,12 @@ from __future__ import annotations
 import os
 
 import yaml
+from fpr_model.node_parameters import NodeParameters
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from fpr_control.joy_timeline import timeline_from_dict
-from fpr_control.node_utils import describe, spin_node
+from fpr_control.node_utils import spin_node
 from fpr_control.teleop_node import default_mapping_file
 
 
@@ -27,14 +28,14 @@ def resolve_script(name: str) -> str:
 class JoyScriptNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__("joy_script", **node_kwargs)
-        d = self.declare_parameter
+        d = NodeParameters(self)
         script = d("script", "takeoff_hover_land.yaml",
-                   describe("timeline YAML (path or name in config/joy_scripts)")).value
-        rate = float(d("rate", 50.0, describe("[Hz] Joy publishing rate")).value)
-        self.start_delay = float(d("start_delay", 0.0, describe("[s] after the start condition")).value)
-        self.wait_for_subscribers = bool(d("wait_for_subscribers", True, describe(
-            "start the timeline when 'joy' has a subscriber")).value)
-        self.stop_at_end = bool(d("stop_at_end", False, describe("stop publishing after the last keyframe")).value)
+                   "timeline YAML (path or name in config/joy_scripts)")
+        rate = float(d("rate", 50.0, "[Hz] Joy publishing rate", low=1.0, high=1000.0))
+        self.start_delay = float(d("start_delay", 0.0, "[s] after the start condition"))
+        self.wait_for_subscribers = bool(d("wait_for_subscribers", True,
+            "start the timeline when 'joy' has a subscriber"))
+        self.stop_at_end = bool(d("stop_at_end", False, "stop publishing after the last keyframe"))
         path = resolve_script(script)
         with open(path, encoding="utf-8") as stream:
             self.timeline = timeline_from_dict(yaml.safe_load(stream))

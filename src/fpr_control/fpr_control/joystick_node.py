@@ -6,28 +6,29 @@ on ``joy`` — for machines without the ROS ``joy`` package. Core: :mod:`fpr_con
 
 from __future__ import annotations
 
+from fpr_model.node_parameters import NodeParameters
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from fpr_control.joystick_device import JoystickDevice
-from fpr_control.node_utils import describe, spin_node
+from fpr_control.node_utils import spin_node
 
 DEVICE_LOG_THROTTLE_S = 10.0  # [s] device errors repeat while unplugged: log rarely
 
 class JoystickNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__("joystick", **node_kwargs)
-        d = self.declare_parameter
+        d = NodeParameters(self)
         self.device_path = d("device", "/dev/input/js0",
-                             describe("joystick device (or a FIFO of js_event records)")).value
-        self.poll_rate = float(d("poll_rate", 100.0, describe("[Hz] device polling rate")).value)
+                             "joystick device (or a FIFO of js_event records)")
+        self.poll_rate = float(d("poll_rate", 100.0, "[Hz] device polling rate", low=1.0, high=10000.0))
         autorepeat = float(d("autorepeat_rate", 20.0,
-                             describe("[Hz] republish the state without events (0: off)")).value)
-        invert = bool(d("invert_axes", True, describe("publish -value/32767 (ROS joy convention: up/left = +1)")).value)
-        self.min_axes = int(d("min_axes", 0, describe("pad Joy.axes with zeros to at least this length")).value)
+                             "[Hz] republish the state without events (0: off)", high=1000.0))
+        invert = bool(d("invert_axes", True, "publish -value/32767 (ROS joy convention: up/left = +1)"))
+        self.min_axes = int(d("min_axes", 0, "pad Joy.axes with zeros to at least this length", high=64))
         self.min_buttons = int(d("min_buttons", 0,
-                                 describe("pad Joy.buttons with zeros to at least this length")).value)
-        self.reconnect_period = float(d("reconnect_period", 1.0, describe("[s] between open attempts")).value)
+                                 "pad Joy.buttons with zeros to at least this length", high=64))
+        self.reconnect_period = float(d("reconnect_period", 1.0, "[s] between open attempts", low=0.01, high=3600.0))
         self.device = JoystickDevice(self.device_path, invert_axes=invert)
         self.pub = self.create_publisher(Joy, "joy", 10)
         self._next_open = 0.0

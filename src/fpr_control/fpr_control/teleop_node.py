@@ -22,12 +22,13 @@ import math
 import os
 
 import yaml
+from fpr_model.node_parameters import NodeParameters
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Joy
 
-from fpr_control.node_utils import LOG_THROTTLE_S, describe, spin_node
+from fpr_control.node_utils import LOG_THROTTLE_S, spin_node
 from fpr_control.target_approach import TargetApproach, approach_config_from_teleop
 from fpr_control.teleop_filter import MODE_NAMES, TeleopFilter, config_from_dict
 from fpr_control.teleop_start import ReportedLegAngles, ReportedLegAnglesConfig
@@ -46,33 +47,34 @@ def default_mapping_file() -> str:
 class TeleopNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__("teleop", **node_kwargs)
-        d = self.declare_parameter
-        n = int(d("n", 3, describe("number of legs (TeleopCommand.leg_angles length)")).value)
-        self.rate = float(d("rate", 50.0, describe("publishing rate [Hz]")).value)
+        d = NodeParameters(self)
+        n = int(d("n", 3, "number of legs (TeleopCommand.leg_angles length)", low=3, high=64))
+        self.rate = float(d("rate", 50.0, "publishing rate [Hz]", low=1.0, high=1000.0))
         mapping_file = d("mapping_file", "",
-                         describe("gamepad mapping YAML (empty: installed config/teleop.yaml)")).value
-        use_feasibility = bool(d("feasible_leg_range", False, describe(
+                         "gamepad mapping YAML (empty: installed config/teleop.yaml)")
+        use_feasibility = bool(d("feasible_leg_range", False,
             "also clamp the leg angle into fpr_model.feasibility.feasible_leg_angle_range at the commanded roll/pitch"
-        )).value)
-        self.min_force_margin = float(d("min_force_margin", 2.0, describe("[N] feasibility threshold")).value)
-        self.min_moment_margin = float(d("min_moment_margin", 1.0, describe("[N m] feasibility threshold")).value)
-        legs_from_info = bool(d("initial_legs_from_info", True, describe(
+        ))
+        self.min_force_margin = float(d("min_force_margin", 2.0, "[N] feasibility threshold"))
+        self.min_moment_margin = float(d("min_moment_margin", 1.0, "[N m] feasibility threshold"))
+        legs_from_info = bool(d("initial_legs_from_info", True,
             "before FLY, follow the mean of the UAVs' leg angles on /fpr/info (roll/pitch at 0), so arming "
-            "commands no configuration change; false: start from the mapping's initial values")).value)
-        info_timeout = float(d("info_timeout", 0.5, describe(
-            "[s] an /fpr/info leg angle older than this is not used")).value)
-        info_smoothing = float(d("info_smoothing", 1.0, describe(
-            "[s] time constant of the average of the reported leg angles (0: none)")).value)
-        target_approach = bool(d("target_approach", False, describe(
+            "commands no configuration change; false: start from the mapping's initial values"))
+        info_timeout = float(d("info_timeout", 0.5,
+            "[s] an /fpr/info leg angle older than this is not used", low=0.001, high=60.0))
+        info_smoothing = float(d("info_smoothing", 1.0,
+            "[s] time constant of the average of the reported leg angles (0: none)"))
+        target_approach = bool(d("target_approach", False,
             "hybrid scheme of thesis 4.4.2 Scenario II: in FLY, x/y velocity and yaw rate from the target-approach "
             "law (4.39) on the relative target pose /fpr/target (z velocity, contact force, roll, pitch, legs "
-            "stay with the operator); false: sticks only, /fpr/target not subscribed")).value)
-        target_lambda_p = float(d("target_lambda_p", 0.4, describe(
-            "[1/s] lambda_p of (4.39): F_Fp x/y velocity = lambda_p * relative target x/y")).value)
-        target_lambda_psi = float(d("target_lambda_psi", 0.25, describe(
-            "[1/s] lambda_psi of (4.39): F_Fp yaw rate = lambda_psi * relative target yaw")).value)
-        target_timeout = float(d("target_timeout", 0.5, describe(
-            "[s] a /fpr/target pose older than this is not used (back to the sticks)")).value)
+            "stay with the operator); false: sticks only, /fpr/target not subscribed"))
+        target_lambda_p = float(d("target_lambda_p", 0.4,
+            "[1/s] lambda_p of (4.39): F_Fp x/y velocity = lambda_p * relative target x/y"))
+        target_lambda_psi = float(d("target_lambda_psi", 0.25,
+            "[1/s] lambda_psi of (4.39): F_Fp yaw rate = lambda_psi * relative target yaw"))
+        target_timeout = float(d("target_timeout", 0.5,
+            "[s] a /fpr/target pose older than this is not used (back to the sticks)", low=0.001,
+            high=60.0))
         path = mapping_file or default_mapping_file()
         with open(path, encoding="utf-8") as stream:
             config = config_from_dict(yaml.safe_load(stream), n=n)

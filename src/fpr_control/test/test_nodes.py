@@ -310,23 +310,57 @@ def test_controller_node_bounds_teleop_and_refuses_a_second_zeta_publisher():
         graph.close()
 
 
-@pytest.mark.parametrize("factory", [ControllerNode, TeleopNode, JoyScriptNode])
-def test_parameters_read_at_start_refuse_a_runtime_set(factory):
-    """Issue 14: `ros2 param set max_thrust 5` (or a bogus mode, a negative rate) reported success and changed
-    nothing; every parameter is read-only now, so the set is refused and the value stays."""
+def test_dynamic_max_thrust_caps_the_next_setpoint():
+    """Issue 14: a dynamic parameter takes effect within one period. The controller flies (communicating, fed a
+    steady state) at its hover share (~11 N); max_thrust set to 6 N caps every setpoint computed after the set
+    (header stamp later than the set), and a refused value (NaN) changes nothing."""
+    graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("uav_id", value=1), Parameter("mode", value="communicating")])
+    try:
+        helper = graph.helper
+        setpoints = []
+        helper.create_subscription(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", setpoints.append, BEST_EFFORT)
+        local_pub = helper.create_publisher(LocalState, "/fpr/uav1/local_state", 10)
+        info_pub = helper.create_publisher(InformationVector, "/fpr/info", BEST_EFFORT)
+        teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+
+        def feed():
+            local_pub.publish(_local_state())
+            teleop_pub.publish(_teleop())
+            for j in (2, 3):
+                info_pub.publish(_info(j))
+
+        timer = helper.create_timer(0.02, feed)
+        assert wait_for(lambda: len(setpoints) > 20 and setpoints[-1].thrust > 8.0, timeout=8.0)
+        (refused,) = graph.node.set_parameters([Parameter("max_thrust", value=float("nan"))])
+        assert not refused.successful and graph.node.controller.config.max_thrust == 25.0
+        set_at = graph.node.get_clock().now().nanoseconds
+        (result,) = graph.node.set_parameters([Parameter("max_thrust", value=6.0)])
+        assert result.successful, result.reason
+        count = len(setpoints)
+        assert wait_for(lambda: len(setpoints) > count + 10, timeout=3.0)
+        after = [sp for sp in setpoints if sp.header.stamp.sec * 10**9 + sp.header.stamp.nanosec > set_at]
+        assert len(after) >= 10 and all(sp.thrust <= 6.0 + 1e-9 for sp in after), [sp.thrust for sp in after[:5]]
+        # the first setpoint stamped after the set is at most one period after it: the cap holds from there
+        first = after[0].header.stamp.sec * 10**9 + after[0].header.stamp.nanosec
+        assert first - set_at <= 2 * 20_000_000
+        helper.destroy_timer(timer)
+    finally:
+        graph.close()
+
+
+def test_read_only_parameters_refuse_a_runtime_set_and_keep_their_value():
+    """Issue 14: `ros2 param set mode bogus_mode` / `rate -3` reported success and changed nothing; parameters
+    read at start-up are read-only now (tests/test_node_parameters.py covers every parameter of every node)."""
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
-        node = factory(context=context)
-        names = [n for n in ("max_thrust", "mode", "rate", "script") if node.has_parameter(n)]
-        assert names, "no parameter to try"
-        for name in names:
+        node = ControllerNode(context=context)
+        for name, bogus in (("mode", "bogus_mode"), ("rate", -3.0), ("uav_id", 2)):
             before = node.get_parameter(name).value
-            bogus = "bogus_mode" if isinstance(before, str) else -3.0 if isinstance(before, float) else -3
             result = node.set_parameters([Parameter(name, value=bogus)])[0]
             assert not result.successful and "read-only" in result.reason.lower(), (name, result.reason)
-            assert node.get_parameter(name).value == before
-            assert node.describe_parameter(name).read_only
+            assert node.get_parameter(name).value == before and node.describe_parameter(name).read_only
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)

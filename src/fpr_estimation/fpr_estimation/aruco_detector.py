@@ -13,8 +13,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from fpr_model.calibration import CameraModel
+from fpr_model.node_parameters import NodeParameters, Param
 from fpr_model.rotations import rotmat_to_quat
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -25,19 +25,20 @@ from fpr_msgs.msg import MarkerDetection
 
 _PARAMETERS = {
     "dictionary": ("DICT_ARUCO_MIP_36H12", "OpenCV ArUco dictionary name"),
-    "marker_id": (0, "id of the marker under the platform"),
-    "marker_size": (0.109, "[m] side of the marker's black square"),
-    "corner_refinement": ("apriltag", "corner refinement: none | subpix | contour | apriltag"),
-    "corner_refinement_win_size": (5, "[px] corner refinement window (subpix)"),
+    "marker_id": Param(0, "id of the marker under the platform", high=4095),
+    "marker_size": Param(0.109, "[m] side of the marker's black square", low=0.001, high=10.0),
+    "corner_refinement": Param("apriltag", "corner refinement", choices=("none", "subpix", "contour", "apriltag")),
+    "corner_refinement_win_size": Param(5, "[px] corner refinement window (subpix)", low=1, high=100),
     "corner_refinement_max_iterations": (30, "corner refinement iterations"),
     "corner_refinement_min_accuracy": (0.01, "[px] corner refinement stop criterion"),
-    "adaptive_thresh_win_size_min": (3, "[px] adaptive threshold window, smallest"),
-    "adaptive_thresh_win_size_max": (23, "[px] adaptive threshold window, largest"),
-    "adaptive_thresh_win_size_step": (10, "[px] adaptive threshold window step"),
-    "min_marker_perimeter_rate": (0.03, "smallest marker perimeter / image max dimension"),
-    "april_tag_min_white_black_diff": (30, "[grey levels] AprilTag quad detector: min white-black difference "
-                                           "(OpenCV's 5 chases pixel noise: ~50x slower on noisy frames)"),
-    "ambiguity_threshold": (2.0, "IPPE ambiguity ratio below which the solution closest to the previous is kept"),
+    "adaptive_thresh_win_size_min": Param(3, "[px] adaptive threshold window, smallest", low=3, high=255),
+    "adaptive_thresh_win_size_max": Param(23, "[px] adaptive threshold window, largest", low=3, high=255),
+    "adaptive_thresh_win_size_step": Param(10, "[px] adaptive threshold window step", low=1, high=255),
+    "min_marker_perimeter_rate": Param(0.03, "smallest marker perimeter / image max dimension", high=4.0),
+    "april_tag_min_white_black_diff": Param(30, "[grey levels] AprilTag quad detector: min white-black difference "
+                                           "(OpenCV's 5 chases pixel noise: ~50x slower on noisy frames)", high=255),
+    "ambiguity_threshold": Param(2.0, "IPPE ambiguity ratio below which the solution closest to the previous is kept",
+                                 low=1.0, high=1000.0),
     "publish_debug_image": (False, "publish marker/debug_image with the pose axes drawn"),
     "log_interval": (2.0, "[s] minimum interval between repeated warnings"),
 }
@@ -47,8 +48,8 @@ class ArucoDetectorNode(Node):
     def __init__(self, **kwargs) -> None:
         """kwargs go to rclpy.node.Node (context, namespace, parameter_overrides, ...)."""
         super().__init__("aruco_detector", **kwargs)
-        for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
+        self.parameters = NodeParameters(self)
+        self.parameters.declare_all(_PARAMETERS)
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         self._config = ArucoConfig(
             dictionary=str(p["dictionary"]), marker_id=int(p["marker_id"]), marker_size=float(p["marker_size"]),

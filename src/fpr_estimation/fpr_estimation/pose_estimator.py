@@ -19,10 +19,10 @@ import math
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from fpr_model.calibration import CameraModel, EulerZxzPose, VisionCalibration
+from fpr_model.calibration import EULER_ORDERS, CameraModel, EulerZxzPose, VisionCalibration
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
+from fpr_model.node_parameters import NodeParameters, Param
 from geometry_msgs.msg import TwistStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu
@@ -34,10 +34,11 @@ from fpr_estimation.node_utils import spin_node
 from fpr_msgs.msg import LocalState, MarkerDetection
 
 _PARAMETERS = {
-    "uav_id": (1, "UAV index i (1-based): selects the leg anchor alpha_i = 2 pi (i - 1) / n"),
-    "n": (3, "number of UAVs / legs"),
+    "uav_id": Param(1, "UAV index i (1-based): selects the leg anchor alpha_i = 2 pi (i - 1) / n", low=1, high=64),
+    "n": Param(3, "number of UAVs / legs", low=3, high=64),
     "platform_radius": (0.127, "[m] r, platform centre to revolute joint (Table B.1)"),
-    "filter": ("ekf", "ekf (thesis (4.9)-(4.16)) or mekf (multiplicative error-state EKF)"),
+    "filter": Param("ekf", "ekf (thesis (4.9)-(4.16)) or mekf (multiplicative error-state EKF)",
+                    choices=("ekf", "mekf")),
     "estimate_gyro_bias": (True, "mekf only: estimate a gyro bias"),
     "position_random_walk": (0.05, "[m/sqrt(s)] process noise of p_p_i (Q)"),
     "attitude_random_walk": (0.03, "[rad/sqrt(s)] process noise of the relative attitude (Q)"),
@@ -45,7 +46,7 @@ _PARAMETERS = {
     "initial_gyro_bias_sigma": (0.02, "[rad/s] mekf initial bias uncertainty"),
     "measurement_position_sigma": (0.02, "[m] detection position noise per axis (R)"),
     "measurement_angle_sigma": (math.radians(2.0), "[rad] detection angle noise per axis (R)"),
-    "gate_mode": ("threshold", "innovation gate: threshold | mahalanobis | off"),
+    "gate_mode": Param("threshold", "innovation gate", choices=("threshold", "mahalanobis", "off")),
     "gate_max_position_error": (0.10, "[m] threshold gate on the position innovation"),
     "gate_max_angle_error": (math.radians(10.0), "[rad] threshold gate on the attitude innovation"),
     "gate_mahalanobis_threshold": (22.46, "chi-square(6) threshold of the Mahalanobis gate"),
@@ -59,14 +60,16 @@ _PARAMETERS = {
     "max_stamp_future": (0.2, "[s] IMU samples / detections stamped later than now + this are refused"),
     "max_marker_distance": (2.0, "[m] detections farther from the camera are refused (also caps the position sigma)"),
     # (Re-)initialisation only on consistent detections (issue 12).
-    "reinit_consistent_detections": (4, "K: (re-)initialise only from K consecutive mutually consistent detections"),
+    "reinit_consistent_detections": Param(4, "K: (re-)initialise only from K consecutive mutually consistent "
+                                          "detections", low=1, high=100),
     "reinit_window": (0.3, "[s] the K consistent detections span at most this"),
     "reinit_position_tolerance": (0.10, "[m] pairwise position agreement of the K detections"),
     "reinit_angle_tolerance": (math.radians(10.0), "[rad] pairwise attitude agreement (after the IMU rotation)"),
     "reinit_min_lost_time": (1.5, "[s] an initialised filter is re-initialised only after this long without an "
                                   "accepted detection (shorter bursts are gated)"),
-    "output_rate": (50.0, "[Hz] local_state publication rate"),
-    "euler_order": ("extrinsic", "how to read the ZXZ angles of Table D.1 (see fpr_model.calibration)"),
+    "output_rate": Param(50.0, "[Hz] local_state publication rate", low=1.0, high=1000.0),
+    "euler_order": Param("extrinsic", "how to read the ZXZ angles of Table D.1 (see fpr_model.calibration)",
+                         choices=EULER_ORDERS),
     "camera_translation_cm": ([8.45, -9.35, 0.79], "[cm] camera position in the body frame, b_T_C (Table D.1)"),
     "camera_euler_zxz": ([1.561, 0.708, 0.829], "[rad] camera ZXZ angles (psi1, phi, psi2), b_T_C (Table D.1)"),
     "marker_translation_cm": ([-0.83, 0.26, -2.47], "[cm] marker position in the platform frame, p_T_M"),
@@ -84,8 +87,8 @@ class PoseEstimatorNode(Node):
     def __init__(self, **kwargs) -> None:
         """kwargs go to rclpy.node.Node (context, namespace, parameter_overrides, ...)."""
         super().__init__("pose_estimator", **kwargs)
-        for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
+        self.parameters = NodeParameters(self)
+        self.parameters.declare_all(_PARAMETERS)
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         order = str(p["euler_order"])
         calibration = VisionCalibration(

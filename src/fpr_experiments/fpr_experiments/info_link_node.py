@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from rcl_interfaces.msg import ParameterDescriptor
+from fpr_model.node_parameters import NodeParameters
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -38,14 +38,13 @@ class InfoLinkNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("info_link", **kwargs)
 
-        def d(name, default, text):
-            return self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True)).value
+        d = NodeParameters(self)
 
-        n = int(d("n", 3, "number of UAVs (receivers 1..n)"))
+        n = int(d("n", 3, "number of UAVs (receivers 1..n)", low=3, high=64))
         pattern = d("output_topic", DEFAULT_OUTPUT_TOPIC, "receivers' topics, {uav} = the receiver's id (each "
                     "controller's info_input_topic)")
-        start = float(d("outage_start", math.inf, "[s] simulation time the link goes down (inf: never)"))
-        end = float(d("outage_end", math.inf, "[s] simulation time the link is back"))
+        start = float(d("outage_start", math.inf, "[s] simulation time the link goes down (inf: never)", high=math.inf))
+        end = float(d("outage_end", math.inf, "[s] simulation time the link is back", high=math.inf))
         scenario_file = d("scenario_file", "", "the simulator's scenario (its 'link' section and seed); empty: "
                           "no channel model, only the outage")
         realism = d("realism", "", "realism profile, as the simulator's: ideal | hardware; empty: the scenario's")

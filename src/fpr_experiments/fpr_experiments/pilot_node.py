@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import yaml
-from rcl_interfaces.msg import ParameterDescriptor
+from fpr_model.node_parameters import NodeParameters
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy
@@ -34,13 +34,12 @@ class PilotNode(Node):
         super().__init__("pilot", **kwargs)
         from fpr_control.joy_timeline import timeline_from_dict
 
-        def d(name, default, text):
-            return self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True)).value
+        d = NodeParameters(self)
 
         script = d("script", "", "pilot script: a joy script with `pilot` and `tasks` sections (name or path)")
         mapping_file = d("mapping_file", "", "teleop mapping YAML (empty: fpr_control's config/teleop.yaml)")
-        rate = float(d("rate", 50.0, "[Hz] Joy publishing rate"))
-        seed = int(d("seed", -1, "operator noise seed (-1: the script's pilot.seed)"))
+        rate = float(d("rate", 50.0, "[Hz] Joy publishing rate", low=1.0, high=1000.0))
+        seed = int(d("seed", -1, "operator noise seed (-1: the script's pilot.seed)", low=-1, high=2**31 - 1))
         path = JOY_SCRIPTS.resolve(script)
         with open(path, encoding="utf-8") as stream:
             document = yaml.safe_load(stream) or {}

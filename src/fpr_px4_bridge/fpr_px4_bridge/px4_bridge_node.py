@@ -21,8 +21,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.battery import thrust_coefficients
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
+from fpr_model.node_parameters import NodeParameters, Param
 from geometry_msgs.msg import TwistStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -37,43 +37,54 @@ from fpr_px4_bridge.offboard import LogEvent, OffboardConfig
 from fpr_px4_bridge.telemetry import BatterySample, BodyVelocitySample, ImuSample
 
 _PARAMETERS = {
-    "uav_id": (1, "UAV index i (1-based): MAVLink target system by default, default UDP port 14540 + i - 1"),
+    "uav_id": Param(1, "UAV index i (1-based): MAVLink target system by default, default UDP port 14540 + i - 1",
+                    low=1, high=64),
     "connection_url": ("", "udp://HOST:PORT (listen), udpout://HOST:PORT, serial:///dev/X or /dev/X; "
                            "empty: udp://127.0.0.1:(14540 + uav_id - 1)"),
     "baud": (921600, "serial baud rate (serial connections only)"),
-    "system_id": (0, "our MAVLink system id; 0: the same as target_system (companion-computer convention)"),
-    "component_id": (191, "our MAVLink component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)"),
-    "target_system": (0, "PX4 system id; 0: uav_id"),
-    "target_component": (1, "PX4 autopilot component id"),
-    "stream_rate": (50.0, "[Hz] SET_ATTITUDE_TARGET repetition rate of the latest setpoint (>= 50)"),
-    "setpoint_timeout": (0.25, "[s] setpoints older than this are not streamed (PX4's failsafe takes over)"),
-    "thrust_min": (0.05, "lower clamp of the normalized thrust (C.1), in [0, 1)"),
-    "a_f": (math.nan, "[N/V] max-thrust slope (C.2); NaN: thesis Table C.1 value of uav_id"),
-    "b_f": (math.nan, "[N] max-thrust offset (C.2); NaN: thesis Table C.1 value of uav_id"),
-    "fallback_voltage": (12.0, "[V] battery voltage used while PX4 reports none"),
+    "system_id": Param(0, "our MAVLink system id; 0: the same as target_system (companion-computer convention)",
+                       high=255),
+    "component_id": Param(191, "our MAVLink component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)", low=1, high=255),
+    "target_system": Param(0, "PX4 system id; 0: uav_id", high=255),
+    "target_component": Param(1, "PX4 autopilot component id", low=1, high=255),
+    "stream_rate": Param(50.0, "[Hz] SET_ATTITUDE_TARGET repetition rate of the latest setpoint (>= 50)", low=50.0,
+                         high=1000.0),
+    "setpoint_timeout": Param(0.25, "[s] setpoints older than this are not streamed (PX4's failsafe takes over)",
+                              low=0.02, high=5.0),
+    "thrust_min": Param(0.05, "lower clamp of the normalized thrust (C.1), in [0, 1)", high=0.99),
+    "a_f": Param(math.nan, "[N/V] max-thrust slope (C.2); NaN: thesis Table C.1 value of uav_id", low=0.0,
+                 high=100.0, allow_nan=True),
+    "b_f": Param(math.nan, "[N] max-thrust offset (C.2); NaN: thesis Table C.1 value of uav_id", low=-1000.0,
+                 high=1000.0, allow_nan=True),
+    "fallback_voltage": Param(12.0, "[V] battery voltage used while PX4 reports none", low=1.0, high=60.0),
     "battery_compensation": (True, "true: f_max (C.2) at the reported battery voltage (Appendix C thrust "
                                    "regulation); false: at nominal_voltage, the thrust falls as the battery sags "
                                    "(the first Exp. I flights, thesis §3.5.1)"),
-    "nominal_voltage": (12.4, "[V] f_max voltage when battery_compensation is false (charged 3S)"),
+    "nominal_voltage": Param(12.4, "[V] f_max voltage when battery_compensation is false (charged 3S)", low=1.0,
+                             high=60.0),
     "quaternion_tolerance": (1e-3, "setpoints with | |q| - 1 | above this are refused"),
-    "thrust_refusal_ratio": (1.1, "in [1, 2]: a setpoint thrust above this x f_max (C.2) at the present voltage is "
+    "thrust_refusal_ratio": Param(1.1, "in [1, 2]: a setpoint thrust above this x f_max (C.2) at the present voltage "
+                                  "is "
                                   "refused (the last valid setpoint streams until setpoint_timeout); one in "
                                   "(f_max, ratio x f_max] is flown at normalized 1.0, announced; 1.0: refuse all "
-                                  "above f_max"),
+                                  "above f_max", low=1.0, high=2.0),
     "heartbeat_timeout": (0.45, "[s] no frame at all from PX4 (telemetry, HEARTBEAT, ACK) for this long: 'PX4 "
                                 "silent', DISCONNECTED (logged at the next stream tick: < 0.5 s at 50 Hz)"),
-    "offboard_warmup": (1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)"),
+    "offboard_warmup": Param(1.2, "[s] continuous setpoint stream before requesting OFFBOARD (>= 1)", low=1.0,
+                             high=60.0),
     "command_retry_interval": (0.5, "[s] between retries of unconfirmed ARM / OFFBOARD / LAND / KILL commands"),
-    "command_max_attempts": (6, "attempts of ARM / OFFBOARD / LAND before giving up (KILL retries forever)"),
+    "command_max_attempts": Param(6, "attempts of ARM / OFFBOARD / LAND before giving up (KILL retries forever)",
+                                  low=1, high=1000),
     "kill_flight_termination": (False, "KILL also sends DO_FLIGHTTERMINATION (PX4 then needs a reboot)"),
     "signing_key_file": ("", "MAVLink 2 signing secret (64 hex digits or 32 bytes); empty: signing off"),
-    "signing_link_id": (0, "MAVLink 2 signing link id"),
-    "status_rate": (10.0, "[Hz] status publication rate"),
+    "signing_link_id": Param(0, "MAVLink 2 signing link id", high=255),
+    "status_rate": Param(10.0, "[Hz] status publication rate", low=0.1, high=1000.0),
     "body_frame_id": ("", "frame_id of imu and velocity_body; empty: uav<i>/base_link"),
     "teleop_topic": ("/fpr/teleop", "TeleopCommand topic (mode: idle / arm / fly / land / kill)"),
-    "px4_boot_clock": ("auto", "estimate: map PX4's time_boot_ms onto the ROS clock from the telemetry (a real "
+    "px4_boot_clock": Param("auto", "estimate: map PX4's time_boot_ms onto the ROS clock from the telemetry (a real "
                                "vehicle); ros_time: PX4's boot clock is the ROS clock (PX4 SITL in lockstep, "
-                               "fpr_sim's emulator); auto: ros_time with use_sim_time, else estimate"),
+                               "fpr_sim's emulator); auto: ros_time with use_sim_time, else estimate",
+                            choices=("auto", "estimate", "ros_time")),
     "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
     "wall_silence_timeout": (0.8, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
@@ -114,8 +125,8 @@ class Px4BridgeNode(Node):
     def __init__(self, **kwargs) -> None:
         """``kwargs`` go to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides`` in tests)."""
         super().__init__("px4_bridge", **kwargs)
-        for name, (default, description) in _PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description, read_only=True))
+        self.parameters = NodeParameters(self)
+        self.parameters.declare_all(_PARAMETERS)
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         uav_id = int(p["uav_id"])
         defaults = thrust_coefficients(uav_id)

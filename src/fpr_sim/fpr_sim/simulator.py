@@ -24,6 +24,7 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
+from fpr_model.node_parameters import NodeParameters
 from fpr_model.robot_description import robot_description
 from fpr_px4_bridge.link import load_signing_key
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, TransformStamped, Vector3
@@ -39,7 +40,7 @@ from fpr_msgs.msg import FprState, MarkerDetection
 from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
 from fpr_sim.plant import GroundTruth
-from fpr_sim.scenario import load_scenario
+from fpr_sim.scenario import load_scenario, realism_profiles
 from fpr_sim.sensors import DelayLine, MotionCapture
 from fpr_sim.simulation import Simulation, SimulationOptions
 from fpr_sim.target import TARGET_FRAME, TargetEmulator
@@ -65,41 +66,44 @@ def _pose(position, quat_wxyz) -> Pose:
 class SimulatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("simulator", **kwargs)
-        p = self.declare_parameter
-        p("scenario_file", "", descriptor=_desc(
+        p = NodeParameters(self)
+        p("scenario_file", "", (
             "scenario YAML: a path, or a bundled scenario's name (config/scenarios: hover, ground_start, ...); empty: "
             "default scenario"))
-        p("realism", "", descriptor=_desc(
+        p("realism", "", (
             "realism profile: ideal | hardware (config/realism/); empty: the scenario's own 'realism' key (default "
-            "ideal). The scenario's explicit values always win over the profile's"))
-        p("real_time_factor", 1.0, descriptor=_desc("pacing: simulated s per wall s; 0 = as fast as lockstep allows"))
-        p("lockstep", True, descriptor=_desc(
+            "ideal). The scenario's explicit values always win over the profile's"), choices=("", *realism_profiles()))
+        p("real_time_factor", 1.0, "pacing: simulated s per wall s; 0 = as fast as lockstep allows", high=1000.0)
+        p("lockstep", True, (
             "wait at each control period for every streaming UAV's setpoint computed for that period"))
-        p("lockstep_timeout", 30.0, descriptor=_desc(
-            "[s] wall: watchdog of a live setpoint stream that neither delivers nor ends (a dead or hung node)"))
-        p("lockstep_on_timeout", "stop", descriptor=_desc(
-            "stop: stop the simulation with one error naming the UAVs; continue: count it and fly on (fault runs)"))
-        p("control_rate", 50.0, descriptor=_desc("controllers' rate used by the lockstep [Hz]"))
-        p("physics_rate", 1000.0, descriptor=_desc("fixed physics step rate [Hz]"))
-        p("clock_rate", 250.0, descriptor=_desc("/clock publishing rate [Hz], at most 250"))
-        p("ground_truth_rate", 100.0, descriptor=_desc("/fpr/ground_truth rate [Hz]"))
-        p("tf_rate", 50.0, descriptor=_desc("/tf rate [Hz] (the true robot's frames for RViz / Foxglove); 0 = no /tf, "
-                                            "/tf_static nor /robot_description"))
-        p("local_base_port", 14580, descriptor=_desc(
-            "UAV i's PX4 emulator binds 127.0.0.1:local_base_port+i-1, as PX4 SITL instance i-1 (0: ephemeral)"))
-        p("remote_base_port", 14540, descriptor=_desc(
+        p("lockstep_timeout", 30.0, (
+            "[s] wall: watchdog of a live setpoint stream that neither delivers nor ends (a dead or hung node)"),
+          low=0.1, high=3600.0)
+        p("lockstep_on_timeout", "stop", (
+            "stop: stop the simulation with one error naming the UAVs; continue: count it and fly on (fault runs)"),
+          choices=("stop", "continue"))
+        p("control_rate", 50.0, "controllers' rate used by the lockstep [Hz]", low=1.0, high=1000.0)
+        p("physics_rate", 1000.0, "fixed physics step rate [Hz]", low=10.0, high=100000.0)
+        p("clock_rate", 250.0, "/clock publishing rate [Hz], at most 250", low=1.0, high=250.0)
+        p("ground_truth_rate", 100.0, "/fpr/ground_truth rate [Hz]", low=0.1, high=1000.0)
+        p("tf_rate", 50.0, "/tf rate [Hz] (the true robot's frames for RViz / Foxglove); 0 = no /tf, /tf_static nor "
+          "/robot_description", high=1000.0)
+        p("local_base_port", 14580, (
+            "UAV i's PX4 emulator binds 127.0.0.1:local_base_port+i-1, as PX4 SITL instance i-1 (0: ephemeral)"),
+          high=65535)
+        p("remote_base_port", 14540, (
             "UAV i's PX4 emulator sends HEARTBEAT/telemetry to 127.0.0.1:remote_base_port+i-1 (where px4_bridge "
-            "listens), then replies to whoever talks to it; 0: silent until contacted"))
-        p("emulated_cameras", False, descriptor=_desc("publish noisy marker poses instead of images"))
-        p("signing_key_file", "", descriptor=_desc(
+            "listens), then replies to whoever talks to it; 0: silent until contacted"), high=65535)
+        p("emulated_cameras", False, "publish noisy marker poses instead of images")
+        p("signing_key_file", "", (
             "MAVLink 2 signing key of every emulated PX4 (64 hex digits or 32 bytes, as px4_bridge's): frames signed, "
             "unsigned input refused; empty: no signing (PX4's default)"))
-        p("duration", 0.0, descriptor=_desc("stop after this simulated time [s]; 0 = run until shutdown"))
-        p("wait_for_clock_subscribers", 0, descriptor=_desc(
+        p("duration", 0.0, "stop after this simulated time [s]; 0 = run until shutdown", high=1e7)
+        p("wait_for_clock_subscribers", 0, (
             "run(): before the first step, wait until /clock has this many subscriptions (every simulated-time node "
-            "of a multi-process graph), so that no process misses the start; 0 = start at once"))
-        p("wait_for_clock_subscribers_timeout", 60.0, descriptor=_desc(
-            "[s] wall: give up waiting for the /clock subscribers and start anyway (with a warning)"))
+            "of a multi-process graph), so that no process misses the start; 0 = start at once"), high=1000)
+        p("wait_for_clock_subscribers_timeout", 60.0, (
+            "[s] wall: give up waiting for the /clock subscribers and start anyway (with a warning)"), high=3600.0)
         get = self.get_parameter
         self.scenario = load_scenario(get("scenario_file").value, realism=str(get("realism").value) or None)
         options = SimulationOptions(physics_rate=float(get("physics_rate").value),
@@ -383,12 +387,6 @@ class SimulatorNode(Node):
     def destroy_node(self) -> None:
         self.sim.close()
         super().destroy_node()
-
-
-def _desc(text: str):
-    from rcl_interfaces.msg import ParameterDescriptor
-
-    return ParameterDescriptor(description=text, read_only=True)
 
 
 def main(args=None) -> None:
