@@ -29,8 +29,64 @@ def test_experiment_runs_quick_and_passes_its_checks(name, tmp_path):
         assert not variant.callback_errors, variant.callback_errors[:3]
         assert not failed, f"{name}/{variant_id}: {failed}"
         assert os.path.getsize(os.path.join(variant.report_dir, "flight.mcap")) > 10_000
+        assert_mcap_shows_the_robot_in_3d(os.path.join(variant.report_dir, "flight.mcap"))
         assert all(math.isfinite(variant.metrics[m]) for m in ("max_abs_roll_deg", "max_height_m"))
     assert os.path.exists(os.path.join(result.report_dir, "metrics.json"))
+
+
+def _walk_to_world(parents: dict[str, str], frame: str) -> bool:
+    for _ in range(16):
+        if frame == "world":
+            return True
+        if frame not in parents:
+            return False
+        frame = parents[frame]
+    return False
+
+
+def assert_mcap_shows_the_robot_in_3d(path: str) -> None:
+    """Issue 14: what Foxglove / RViz need from a report's MCAP. Every /tf message of the simulator's tree (a recorded
+    instant) resolves world -> every uav<i>/base_link on its own, with no gap longer than 0.1 s between instants;
+    /tf_static hangs each camera below its UAV; the estimators' frames hang below their UAV's body; the
+    /robot_description URDF parses with ROS's URDF parser (urdf_parser_py) and has n legs and n UAVs."""
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+    from urdf_parser_py.urdf import URDF
+
+    description, statics, instants, others = None, {}, [], {}
+    with open(path, "rb") as stream:
+        for _schema, channel, message in make_reader(stream).iter_messages(
+                topics=["/tf", "/tf_static", "/robot_description"]):
+            if channel.topic == "/robot_description":
+                description = deserialize_message(message.data, String).data
+                continue
+            transforms = deserialize_message(message.data, TFMessage).transforms
+            parents = {t.child_frame_id: t.header.frame_id for t in transforms}
+            if channel.topic == "/tf_static":
+                statics.update(parents)
+            elif any(t.header.frame_id == "world" for t in transforms):
+                stamp = transforms[0].header.stamp
+                instants.append((stamp.sec + 1e-9 * stamp.nanosec, parents))
+            else:
+                others.update(parents)
+    assert description is not None, "no /robot_description"
+    robot = URDF.from_xml_string(description)
+    links = {link.name for link in robot.links}
+    n = sum(1 for name in links if name.startswith("leg") and name[3:].isdigit())
+    assert n >= 3 and {f"uav{i}/base_link" for i in range(1, n + 1)} <= links, sorted(links)
+    assert {f"leg{i}" for i in range(1, n + 1)} <= links and "platform" in links
+    assert len(instants) > 10, f"only {len(instants)} /tf instants"
+    times = [t for t, _ in instants]
+    assert max(b - a for a, b in zip(times, times[1:], strict=False)) <= 0.1 + 1e-9
+    for t, parents in instants:
+        unresolved = [i for i in range(1, n + 1) if not _walk_to_world(parents, f"uav{i}/base_link")]
+        assert not unresolved, f"t = {t:.3f} s: /tf does not resolve world -> uav{unresolved}"
+    for i in range(1, n + 1):
+        assert statics.get(f"uav{i}/camera_optical") == f"uav{i}/base_link", statics
+    for child, parent in others.items():  # the estimators' platform_estimate frames
+        assert child.endswith("/platform_estimate") and parent == child.split("/")[0] + "/base_link", (child, parent)
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

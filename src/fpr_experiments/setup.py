@@ -19,6 +19,7 @@ setup(
         ('share/' + package_name + '/config/mappings', glob('config/mappings/*.yaml')),
         ('share/' + package_name + '/config/thesis', glob('config/thesis/*.yaml')),
         ('share/' + package_name + '/config/calibration', glob('config/calibration/*.yaml')),
+        ('share/' + package_name + '/config/viz', glob('config/viz/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

@@ -290,7 +290,7 @@ class PoseEstimatorCore:
             self.last_gate = GateDecision(False, _NAN, _NAN, _NAN)
             return self.last_gate
         innovation, minimal, S = self.filter.innovation(position, quaternion)
-        decision = evaluate_gate(self.config.gate, minimal, S)
+        decision = evaluate_gate(self.config.gate, minimal, S, self.lost_time(stamp))
         self.last_gate = decision
         if decision.accepted:
             try:

@@ -22,10 +22,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.calibration import EULER_ORDERS, CameraModel, EulerZxzPose, VisionCalibration
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
 from fpr_model.node_parameters import NodeParameters, Param
-from geometry_msgs.msg import TwistStamped
+from fpr_model.rotations import inverse_pose
+from geometry_msgs.msg import TransformStamped, TwistStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu
+from tf2_msgs.msg import TFMessage
 
 from fpr_estimation.ekf import FilterNoise
 from fpr_estimation.estimator import EstimatorConfig, LogLimiter, PoseEstimatorCore
@@ -50,6 +52,11 @@ _PARAMETERS = {
     "gate_max_position_error": (0.10, "[m] threshold gate on the position innovation"),
     "gate_max_angle_error": (math.radians(10.0), "[rad] threshold gate on the attitude innovation"),
     "gate_mahalanobis_threshold": (22.46, "chi-square(6) threshold of the Mahalanobis gate"),
+    "gate_position_error_rate": (0.08, "[m/s] threshold gate: growth of the position bound per second without an "
+                                       "accepted detection (0: a fixed bound)"),
+    "gate_angle_error_rate": (math.radians(6.0), "[rad/s] threshold gate: growth of the attitude bound"),
+    "gate_position_error_limit": (0.18, "[m] threshold gate: cap of the growing position bound"),
+    "gate_angle_error_limit": (math.radians(16.0), "[rad] threshold gate: cap of the growing attitude bound"),
     "stale_timeout": (0.5, "[s] no accepted detection for this long: valid = false (prediction continues)"),
     "max_prediction_step": (0.1, "[s] IMU gaps longer than this are not integrated (reported)"),
     # Input guards (issue 12): refused inputs never reach the filter.
@@ -75,6 +82,10 @@ _PARAMETERS = {
     "marker_translation_cm": ([-0.83, 0.26, -2.47], "[cm] marker position in the platform frame, p_T_M"),
     "marker_euler_zxz": ([-0.716, 3.136, 0.837], "[rad] marker ZXZ angles (psi1, phi, psi2), p_T_M"),
     "frame_id": ("", "frame_id of local_state; empty: uav<i>/platform"),
+    "publish_tf": (True, "publish the estimate on /tf as body_frame_id -> tf_frame_id (the platform as this UAV "
+                         "estimates it, beside the simulator's true 'platform' in RViz / Foxglove)"),
+    "body_frame_id": ("", "parent frame of the estimate's TF: this UAV's body; empty: uav<i>/base_link"),
+    "tf_frame_id": ("", "child frame of the estimate's TF; empty: uav<i>/platform_estimate"),
     "log_interval": (2.0, "[s] minimum interval between repeated warnings"),
 }
 
@@ -102,7 +113,9 @@ class PoseEstimatorNode(Node):
                               float(p["gyro_bias_random_walk"]), float(p["initial_gyro_bias_sigma"]),
                               float(p["measurement_position_sigma"]), float(p["measurement_angle_sigma"])),
             gate=GateConfig(str(p["gate_mode"]), float(p["gate_max_position_error"]),
-                            float(p["gate_max_angle_error"]), float(p["gate_mahalanobis_threshold"])),
+                            float(p["gate_max_angle_error"]), float(p["gate_mahalanobis_threshold"]),
+                            float(p["gate_position_error_rate"]), float(p["gate_angle_error_rate"]),
+                            float(p["gate_position_error_limit"]), float(p["gate_angle_error_limit"])),
             bounds=InputBounds(float(p["max_body_rate"]), float(p["max_specific_force"]),
                                float(p["max_quaternion_norm_error"]), float(p["max_stamp_future"]),
                                float(p["max_marker_distance"])),
@@ -113,6 +126,11 @@ class PoseEstimatorNode(Node):
             max_prediction_step=float(p["max_prediction_step"]))
         self.core = PoseEstimatorCore(config, calibration)
         self._frame_id = str(p["frame_id"]) or f"uav{config.uav_id}/platform"
+        self._tf_parent = str(p["body_frame_id"]) or f"uav{config.uav_id}/base_link"
+        self._tf_child = str(p["tf_frame_id"]) or f"uav{config.uav_id}/platform_estimate"
+        #: the estimated platform frame under this UAV's body (REP-105 tree: each frame has one parent, so the
+        #: estimate hangs below the true uav<i>/base_link rather than re-parenting it): p T_bi inverted
+        self._tf_pub = self.create_publisher(TFMessage, "/tf", 100) if bool(p["publish_tf"]) else None
         self._uav_id = config.uav_id
         self._log_interval = float(p["log_interval"])
         self._limiter = LogLimiter(self._log_interval)
@@ -207,7 +225,21 @@ class PoseEstimatorNode(Node):
         msg.valid = bool(valid)
         self._pub.publish(msg)
         self.published += 1
+        if self._tf_pub is not None:
+            self._publish_tf(out.position, out.quaternion, msg.header.stamp)
         self._publish_diagnostics(msg, msg.header.stamp)
+
+    def _publish_tf(self, position: np.ndarray, quaternion: np.ndarray, stamp) -> None:
+        """/tf ``uav<i>/base_link -> uav<i>/platform_estimate``: the inverse of the estimate p T_bi (the UAV body's
+        pose in Fp, (4.9)-(4.16)), i.e. the platform's pose in the body frame [m]."""
+        translation, quat = inverse_pose(position, quaternion)
+        transform = TransformStamped()
+        transform.header.stamp, transform.header.frame_id = stamp, self._tf_parent
+        transform.child_frame_id = self._tf_child
+        t, r = transform.transform.translation, transform.transform.rotation
+        t.x, t.y, t.z = (float(v) for v in translation)
+        r.w, r.x, r.y, r.z = (float(v) for v in quat)
+        self._tf_pub.publish(TFMessage(transforms=[transform]))
 
     def _publish_diagnostics(self, state: LocalState | None, stamp) -> None:
         """REP-107 health on /diagnostics once a second: OK while detections keep the estimate valid; WARN while it

@@ -400,3 +400,22 @@ def test_filter_noise_still_validated():
         FilterNoise(position_random_walk=-1.0)
     with pytest.raises(ValueError):
         ReinitConfig(consistent_detections=0)
+
+
+def test_threshold_gate_bound_grows_with_the_time_without_an_accepted_detection():
+    """Issue 11: the bound grows from 10 cm / 10 deg by 8 cm/s and 6 deg/s up to 18 cm / 16 deg, so a filter whose
+    prediction stood still while the UAV moved recaptures the real stream; a rate of 0 is the fixed gate."""
+    from fpr_estimation.gating import evaluate_gate
+
+    gate = GateConfig()
+    assert gate.bounds(0.0) == pytest.approx((0.10, np.radians(10.0)))
+    assert gate.bounds(0.5) == pytest.approx((0.14, np.radians(13.0)))
+    assert gate.bounds(5.0) == pytest.approx((0.18, np.radians(16.0)))
+    assert gate.bounds(float("inf")) == pytest.approx((0.10, np.radians(10.0)))  # never accepted: no growth
+    innovation = np.array([0.13, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert not evaluate_gate(gate, innovation, None, lost=0.05).accepted
+    assert evaluate_gate(gate, innovation, None, lost=0.5).accepted
+    fixed = GateConfig(position_error_rate=0.0, angle_error_rate=0.0)
+    assert not evaluate_gate(fixed, innovation, None, lost=5.0).accepted
+    with pytest.raises(ValueError, match="growth"):
+        GateConfig(position_error_limit=0.05)

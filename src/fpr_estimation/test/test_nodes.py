@@ -14,7 +14,7 @@ from fpr_estimation.pose_estimator import PoseEstimatorNode  # noqa: E402
 from fpr_estimation.synthetic import uav_pose_in_platform  # noqa: E402
 from fpr_model.calibration import VisionCalibration, compose_transforms, invert_transform  # noqa: E402
 from fpr_model.parameters import default_parameters  # noqa: E402
-from fpr_model.rotations import rot_z, rotmat_to_euler_zyx, rotmat_to_quat  # noqa: E402
+from fpr_model.rotations import quat_to_rotmat, rot_z, rotmat_to_euler_zyx, rotmat_to_quat  # noqa: E402
 from fpr_sim.camera_renderer import MarkerRenderer  # noqa: E402
 from geometry_msgs.msg import TwistStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -22,6 +22,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, Imu  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402
 
 from fpr_msgs.msg import LocalState, MarkerDetection  # noqa: E402
 
@@ -134,8 +135,9 @@ def test_pose_estimator_node_with_sim_time(graph, scene):
     imu_pub = helper.create_publisher(Imu, f"{NS}/imu", qos_profile_sensor_data)
     velocity_pub = helper.create_publisher(TwistStamped, f"{NS}/velocity_body", qos_profile_sensor_data)
     marker_pub = helper.create_publisher(MarkerDetection, f"{NS}/marker", qos_profile_sensor_data)
-    states = []
+    states, tfs = [], []
     helper.create_subscription(LocalState, f"{NS}/local_state", states.append, 100)
+    helper.create_subscription(TFMessage, "/tf", tfs.append, 100)
     assert wait_for(lambda: all(p.get_subscription_count() > 0 for p in (clock_pub, imu_pub, velocity_pub,
                                                                          marker_pub)))
     assert wait_for(lambda: node._pub.get_subscription_count() > 0)
@@ -182,6 +184,15 @@ def test_pose_estimator_node_with_sim_time(graph, scene):
     assert last.relative_pose.position.x == pytest.approx(platform_T_body[0, 3], abs=1e-3)
     assert last.relative_yaw == pytest.approx(rotmat_to_euler_zyx(platform_T_body[:3, :3])[2], abs=1e-3)
     assert last.detection_age < 0.06 and last.rejected_detections == 0
+    # Issue 14: the estimate on /tf, uav1/base_link -> uav1/platform_estimate, is the platform's pose in the body:
+    # the inverse of p T_bi, here the scene's true body_T_platform (stamped like the local_state)
+    assert wait_for(lambda: any(m.transforms[0].header.stamp == last.header.stamp for m in tfs))
+    (transform,) = next(m.transforms for m in tfs if m.transforms[0].header.stamp == last.header.stamp)
+    assert (transform.header.frame_id, transform.child_frame_id) == ("uav1/base_link", "uav1/platform_estimate")
+    body_T_platform = np.linalg.inv(platform_T_body)
+    tr, rot = transform.transform.translation, transform.transform.rotation
+    assert [tr.x, tr.y, tr.z] == pytest.approx(body_T_platform[:3, 3].tolist(), abs=2e-3)
+    assert np.allclose(quat_to_rotmat([rot.w, rot.x, rot.y, rot.z]), body_T_platform[:3, :3], atol=2e-3)
     # Issue 12's fault: IMU rates of 1e9 rad/s are refused; the estimate stays valid, finite and unmoved.
     for _ in range(40):
         t += 0.005

@@ -159,6 +159,13 @@ def quat_inverse(q) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0]) / norm2
 
 
+def inverse_pose(position, quat) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of a pose: for the child frame's origin ``position`` and orientation ``quat`` [w, x, y, z] in
+    the parent, the parent's origin and orientation in the child: ``(−R^T t, q^-1)``."""
+    inverse = quat_inverse(np.asarray(quat, dtype=float))
+    return -quat_rotate(inverse, np.asarray(position, dtype=float)), inverse
+
+
 def quat_normalize(q) -> np.ndarray:
     """Unit quaternion ``q / ‖q‖``; raises ValueError on a zero, NaN or inf quaternion."""
     q = as_trailing("q", q, (4,))

@@ -246,3 +246,13 @@ def test_quat_angle_is_the_rotation_angle_between_two_attitudes():
     assert quat_angle(a, a) == pytest.approx(0.0, abs=1e-7)
     with pytest.raises(ValueError):
         quat_angle(a, [0.0, 0.0, 0.0, 0.0])
+
+
+def test_inverse_pose_composes_to_identity():
+    from fpr_model.rotations import euler_zyx_to_quat, inverse_pose, quat_multiply, quat_rotate
+
+    position, quat = np.array([0.3, -1.2, 2.0]), euler_zyx_to_quat(0.4, -0.2, 2.5)
+    inv_position, inv_quat = inverse_pose(position, quat)
+    # child in parent, then parent in child: identity
+    assert np.allclose(quat_rotate(quat, inv_position) + position, 0.0, atol=1e-12)
+    assert np.allclose(np.abs(quat_multiply(quat, inv_quat)), [1.0, 0.0, 0.0, 0.0], atol=1e-12)
