@@ -242,6 +242,10 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     report.write_variant_json(result, record, os.path.join(output_dir, "metrics.json"), scenario)
     if plots:
         report.write_variant_plots(record, experiment, output_dir, dpi=80 if quick else 110)
+        if not quick:  # the 3D animation where people look first (~10-15 s of rendering per flight)
+            from fpr_experiments.animation import write_animation
+
+            write_animation(record, os.path.join(output_dir, "flight.gif"))
     if log:
         failed = [c.text() for c in checks if not c.passed]
         _say(f"[{label}] {record.sim_time:.1f} s simulated in {flight_wall:.1f} s wall (RTF "
