@@ -33,7 +33,8 @@ UPSTREAM_KEYS = {"python3-numpy", "python3-yaml", "python3-opencv", "python3-sci
 #: import name -> rosdep key
 IMPORT_KEYS = {"numpy": "python3-numpy", "yaml": "python3-yaml", "cv2": "python3-opencv", "scipy": "python3-scipy",
                "matplotlib": "python3-matplotlib", "pymavlink": "python3-pymavlink-pip", "mcap": "python3-mcap-pip",
-               "pytest": "python3-pytest"}
+               "pytest": "python3-pytest", "foxglove": "python3-foxglove-sdk-pip",
+               "websockets": "python3-websockets-pip"}
 
 
 def _own_keys() -> set[str]:
@@ -105,7 +106,7 @@ def test_every_key_resolves(package):
 
 def test_own_rosdep_keys_are_pip_keys_that_rosdistro_lacks():
     keys = _own_keys()
-    assert keys == {"python3-pymavlink-pip", "python3-mcap-pip"}
+    assert keys == {"python3-pymavlink-pip", "python3-mcap-pip", "python3-foxglove-sdk-pip", "python3-websockets-pip"}
     for key in keys:
         assert key.endswith("-pip") and key not in UPSTREAM_KEYS
 

@@ -42,6 +42,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--report-only", action="store_true",
                         help="with 'all': rebuild results.md from the reports' metrics.json, fly nothing")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--live-view", type=int, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="serve each flight live to the Foxglove app over WebSocket on 127.0.0.1:PORT (default "
+                             "8765; 0: any free port), the report MCAP's topics (fpr_experiments.live_view)")
     parser.add_argument("--jobs", type=int, default=1,
                         help="with 'all': experiments flown in parallel, each in its own isolated process (its own "
                              "network namespace and ROS domain; 2 cores: 2); default 1")
@@ -167,6 +170,8 @@ def run_main(argv: list[str] | None = None) -> int:
             check_realism(args.realism, "--realism")
         experiments = [load_experiment(name) for name in names]  # every name and file checked before anything flies
         start, status, failed = time.monotonic(), 0, []
+        if args.live_view is not None and args.name == "all" and args.jobs > 1:
+            raise ValueError("--live-view serves one flight at a time: not with --jobs > 1")
         if args.name == "all" and args.jobs > 1:
             failed = _run_parallel(experiments, args, output_root)
             status = 1 if failed else 0
@@ -178,7 +183,7 @@ def run_main(argv: list[str] | None = None) -> int:
             result = run_experiment(name, seed=args.seed, quick=args.quick, cameras=args.cameras,
                                     processes=args.processes, variants=args.variant, output_root=output_root,
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
-                                    realism=args.realism)
+                                    realism=args.realism, live_view_port=args.live_view)
             if not result.passed:
                 status = 1
                 failed.append(name)

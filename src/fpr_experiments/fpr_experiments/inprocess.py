@@ -52,8 +52,9 @@ class InProcessGraph:
     """See the module doc. A context manager: ``close()`` destroys every node and shuts the context down."""
 
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
-                 lean: bool = True, deterministic: bool = True) -> None:
+                 lean: bool = True, deterministic: bool = True, live_view=None) -> None:
         self.deterministic = deterministic
+        self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
         if deterministic:  # bridges read MAVLink when told; the drain replaces the simulator's lockstep
             specs = [replace(s, parameters={**s.parameters, "receive_thread": False}) if s.executable == "px4_bridge"
                      else replace(s, parameters={**s.parameters, "lockstep": False}) if s.executable == "simulator"
@@ -85,7 +86,7 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time)
+        self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view)
         self._executor = SingleThreadedExecutor(context=self.context)
         for node in self.nodes:
             if node is not self.simulator:

@@ -73,7 +73,7 @@ class _Clock:
 
 
 def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: float, *, output_dir: str,
-                  real_time_factor: float = 0.5, label: str = "run", log: bool = True):
+                  real_time_factor: float = 0.5, label: str = "run", log: bool = True, live_view=None):
     """Fly ``duration`` simulated seconds; returns (recording, completed, lockstep timeouts, errors, wall)."""
     import rclpy
 
@@ -88,7 +88,7 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
     n = sum(1 for s in specs if s.executable == "controller")
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
-    recorder = Recorder(context, topics, use_sim_time=True)
+    recorder = Recorder(context, topics, use_sim_time=True, live_view=live_view)
     processes: dict[str, _Process] = {}
     errors: list[str] = []
     try:

@@ -82,13 +82,16 @@ def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[T
 class Recorder(Node):
     """Raw subscriptions to ``topics``, spun by its own executor in a background thread (see the module doc)."""
 
-    def __init__(self, context, topics: Iterable[Topic], use_sim_time: bool = True) -> None:
+    def __init__(self, context, topics: Iterable[Topic], use_sim_time: bool = True, live_view=None) -> None:
+        """``live_view``: a :class:`fpr_experiments.live_view.LiveView` every received message is forwarded to
+        (the same bytes, stamped with the recorder's clock), or None."""
         from rclpy.parameter import Parameter
 
         super().__init__("experiment_recorder", context=context, use_global_arguments=False,
                          start_parameter_services=False,
                          parameter_overrides=[Parameter("use_sim_time", value=use_sim_time)])
         self.topics = {t.name: t for t in topics}
+        self.live_view = live_view
         self.lock = threading.Lock()
         self._data: dict[str, list[bytes]] = {name: [] for name in self.topics}
         for topic in self.topics.values():
@@ -96,17 +99,20 @@ class Recorder(Node):
                              else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if topic.latched
                              else DurabilityPolicy.VOLATILE)
-            self.create_subscription(topic.msg_type, topic.name, self._keep(self._data[topic.name]), qos, raw=True)
+            self.create_subscription(topic.msg_type, topic.name, self._keep(self._data[topic.name], topic.name), qos,
+                                     raw=True)
         self._executor = SingleThreadedExecutor(context=context)
         self._executor.add_node(self)
         self._running = True
         self._thread = threading.Thread(target=self._spin, name="experiment_recorder", daemon=True)
         self._thread.start()
 
-    def _keep(self, store: list):
+    def _keep(self, store: list, topic: str):
         def callback(data: bytes) -> None:
             with self.lock:
                 store.append(data)
+            if self.live_view is not None:
+                self.live_view.log(topic, data, self.get_clock().now().nanoseconds)
         return callback
 
     def _spin(self) -> None:

@@ -177,7 +177,8 @@ def _check(metrics: dict[str, float], experiment: Experiment) -> list[CheckResul
 def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, seed: int | None = None,
                 quick: bool = False, cameras: str | None = None, processes: bool = False,
                 real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
-                scenario_overrides: Mapping[str, Any] | None = None) -> VariantResult:
+                scenario_overrides: Mapping[str, Any] | None = None,
+                live_view_port: int | None = None) -> VariantResult:
     """Fly one variant and write its report folder (see the module doc); ``realism`` None: the experiment's
     profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`)."""
     from fpr_experiments import report
@@ -206,13 +207,24 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
              f"{' + overrides' if scenario_overrides else ''}, seed {scenario.seed}, {duration:.0f} s simulated"
              f"{' (quick)' if quick else ''}, {'processes' if processes else 'one process'} -> {output_dir}")
     wall_start = time.monotonic()
-    if processes:
-        from fpr_experiments.processes import run_processes
+    live_view = None
+    if live_view_port is not None:
+        from fpr_experiments.live_view import LiveView
 
-        outcome = run_processes(specs, topics, duration, output_dir=output_dir, real_time_factor=real_time_factor,
-                                label=label, log=log)
-    else:
-        outcome = _run_in_process(specs, topics, duration, label, log)
+        live_view = LiveView(topics, port=live_view_port)
+        _say(f"[{label}] live view: Foxglove WebSocket on {live_view.url()} ({len(live_view.channels)} topics, the "
+             f"report MCAP's; layout config/viz/fpr_foxglove_layout.json)")
+    try:
+        if processes:
+            from fpr_experiments.processes import run_processes
+
+            outcome = run_processes(specs, topics, duration, output_dir=output_dir,
+                                    real_time_factor=real_time_factor, label=label, log=log, live_view=live_view)
+        else:
+            outcome = _run_in_process(specs, topics, duration, label, log, live_view)
+    finally:
+        if live_view is not None:
+            live_view.stop()
     recording, completed, lockstep_timeouts, errors, flight_wall = outcome
     record = flight_record(recording, n, experiment=experiment.id, variant=variant.id,
                            scenario=os.path.basename(resolved["scenario"]), script=resolved["script"],
@@ -267,10 +279,10 @@ def _last_time(recording) -> float:
     return clock[-1].clock.sec + 1e-9 * clock[-1].clock.nanosec if clock else 0.0
 
 
-def _run_in_process(specs, topics, duration: float, label: str, log: bool):
+def _run_in_process(specs, topics, duration: float, label: str, log: bool, live_view=None):
     from fpr_experiments.inprocess import InProcessGraph
 
-    with InProcessGraph(specs, topics) as graph:
+    with InProcessGraph(specs, topics, live_view=live_view) as graph:
         took = graph.wait_for_discovery()
         if log:
             _say(f"[{label}] {len(graph.nodes)} nodes built and discovered in {took:.1f} s")
@@ -291,13 +303,16 @@ def _run_in_process(specs, topics, duration: float, label: str, log: bool):
 def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, cameras: str | None = None,
                    processes: bool = False, variants: list[str] | None = None, output_root: str | None = None,
                    real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
-                   scenario_overrides: Mapping[str, Any] | None = None) -> ExperimentResult:
+                   scenario_overrides: Mapping[str, Any] | None = None,
+                   live_view_port: int | None = None) -> ExperimentResult:
     """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``.
 
     ``realism``: a realism profile (fpr_sim.scenario.realism_profiles) instead of the experiment's (catalog key
     ``realism``, default :data:`fpr_experiments.catalog.DEFAULT_REALISM`). ``scenario_overrides``: a mapping
     deep-merged over every variant's scenario, e.g. ``{"actuation": {"thrust_noise": 0.02}}``; the merged
-    scenario is each variant's ``scenario.yaml``, the file the simulator and the info link read."""
+    scenario is each variant's ``scenario.yaml``, the file the simulator and the info link read. ``live_view_port``:
+    serve each flight to the Foxglove app on ws://127.0.0.1:<port> while it runs (fpr_experiments.live_view; 0: an
+    ephemeral port, printed)."""
     from fpr_experiments import report
     from fpr_experiments.catalog import check_realism
 
@@ -312,7 +327,7 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
         results[variant.id] = run_variant(
             experiment, variant, os.path.join(root, variant.id), seed=seed, quick=quick, cameras=cameras,
             processes=processes, real_time_factor=real_time_factor, plots=plots, log=log, realism=realism,
-            scenario_overrides=scenario_overrides)
+            scenario_overrides=scenario_overrides, live_view_port=live_view_port)
     result = ExperimentResult(experiment.id, results, root)
     result.summary = report.write_experiment_report(experiment, result, root, quick=quick, seed=seed,
                                                     processes=processes, plots=plots)
