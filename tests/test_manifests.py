@@ -2,10 +2,10 @@
 
 Each package's Python imports (module-level and local, found with ``ast``; the standard library excluded) must be
 declared in its package.xml (exec_depend, or test_depend for its tests), and every declared key must be either a
-workspace package, a ROS package of the Jazzy distribution, a rosdistro python key checked by hand against
-ros/rosdistro ``rosdep/python.yaml`` (UPSTREAM_KEYS below), or a key of the repository's own rosdep source
-``rosdep/fpr.yaml`` (pip keys for what rosdistro lacks). The license is Apache-2.0 everywhere (LICENSE, package.xml,
-setup.py).
+workspace package, a ROS package of the Jazzy distribution or a rosdistro python key (both in the pinned copy
+``rosdep/upstream_keys.yaml``, checked by hand against ros/rosdistro), or a key of the repository's own rosdep
+source ``rosdep/fpr.yaml`` (pip keys for what rosdistro lacks). The license is Apache-2.0 everywhere (LICENSE,
+package.xml, setup.py).
 """
 
 from __future__ import annotations
@@ -23,13 +23,12 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = sorted(p.parent for p in (ROOT / "src").glob("*/package.xml"))
 WORKSPACE = {p.name for p in PACKAGES}
 
-#: ROS 2 Jazzy packages (ros2/rclpy, ros2/common_interfaces, ros2/rcl_interfaces, ros2/launch, ...)
-ROS_PACKAGES = {"rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "rosgraph_msgs", "builtin_interfaces",
-                "rcl_interfaces", "ament_index_python", "launch", "launch_ros", "rosidl_default_generators",
-                "rosidl_default_runtime", "ament_cmake", "diagnostic_msgs", "tf2_msgs", "visualization_msgs"}
-#: keys present in ros/rosdistro rosdep/python.yaml (checked by hand, see the module doc)
-UPSTREAM_KEYS = {"python3-numpy", "python3-yaml", "python3-opencv", "python3-scipy", "python3-matplotlib",
-                 "python3-pytest"}
+with open(ROOT / "rosdep" / "upstream_keys.yaml", encoding="utf-8") as _stream:
+    _UPSTREAM = yaml.safe_load(_stream)
+#: ROS 2 Jazzy packages (the pinned copy rosdep/upstream_keys.yaml, from rosdistro's jazzy/distribution.yaml)
+ROS_PACKAGES = set(_UPSTREAM["ros_packages"])
+#: keys present in ros/rosdistro rosdep/python.yaml (the pinned copy rosdep/upstream_keys.yaml)
+UPSTREAM_KEYS = set(_UPSTREAM["python_keys"])
 #: import name -> rosdep key
 IMPORT_KEYS = {"numpy": "python3-numpy", "yaml": "python3-yaml", "cv2": "python3-opencv", "scipy": "python3-scipy",
                "matplotlib": "python3-matplotlib", "pymavlink": "python3-pymavlink-pip", "mcap": "python3-mcap-pip",

@@ -250,6 +250,7 @@ class ControllerNode(Node):
 
         self._local: LocalEstimate | None = None
         self._local_time = -math.inf
+        self._had_local = False  #: a valid LocalState arrived once: its absence is then a warning, not start-up
         self._teleop: TeleopReference | None = None
         self._teleop_time = -math.inf
         self._imu_yaw: float | None = None
@@ -373,8 +374,16 @@ class ControllerNode(Node):
     def _on_tick(self) -> None:
         now = self._now()
         local = self._local if now - self._local_time <= self.local_timeout else None
+        if local is not None and local.valid:
+            self._had_local = True
         if local is None and not self.controller.uses_ground_truth:
-            self.get_logger().warning("no fresh LocalState: holding", throttle_duration_sec=LOG_THROTTLE_S)
+            if self._had_local:
+                self.get_logger().warning(
+                    f"no fresh LocalState for {self.local_timeout} s: holding (check this UAV's pose_estimator and "
+                    f"camera: ros2 topic hz local_state)", throttle_duration_sec=LOG_THROTTLE_S)
+            else:  # the estimator waits for its first consistent detections: the normal start-up (issue 14)
+                self.get_logger().info("waiting for the first LocalState (start-up): holding",
+                                       throttle_duration_sec=LOG_THROTTLE_S)
         command = self._teleop
         if command is not None and now - self._teleop_time > self.teleop_timeout:
             command = command.stopped()
@@ -382,7 +391,9 @@ class ControllerNode(Node):
                                       throttle_duration_sec=LOG_THROTTLE_S)
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
         out = self.controller.step(now, local, command, self._ground_truth, imu_yaw)
-        if out.warning:
+        if out.warning and not self._had_local and not self.controller.uses_ground_truth:
+            self.get_logger().info(out.warning + " (start-up)", throttle_duration_sec=LOG_THROTTLE_S)
+        elif out.warning:
             self.get_logger().warning(out.warning, throttle_duration_sec=LOG_THROTTLE_S)
         stamp = self.get_clock().now().to_msg()
         uav_id = self.config.uav_id

@@ -59,6 +59,8 @@ __all__ = ["EstimatorConfig", "EstimatorOutput", "GuardEvent", "LogLimiter", "Po
 
 FILTER_KINDS = ("ekf", "mekf")
 _NAN = float("nan")
+#: consecutive gate rejections from which they are a warning (one is an outlier; 5 = 0.25 s at 20 Hz)
+PERSISTENT_REJECTIONS = 5
 
 
 def relative_pose_from_detection(camera_T_marker: np.ndarray, calibration: VisionCalibration) -> np.ndarray:
@@ -312,7 +314,10 @@ class PoseEstimatorCore:
             return self._initialise(stamp, decision)
         self.rejected_detections += 1
         self.consecutive_rejections += 1
-        self._emit("gate", "warning",
+        # an isolated rejection is the gate doing its job (outliers, noise): INFO; a run of them means the filter no
+        # longer follows the detections (camera calibration, a forged stream, a lock-out): WARN
+        persistent = self.consecutive_rejections >= PERSISTENT_REJECTIONS
+        self._emit("gate_persistent" if persistent else "gate", "warning" if persistent else "info",
                    f"detection rejected by the gate: {100 * decision.position_error:.1f} cm, "
                    f"{math.degrees(decision.angle_error):.1f} deg from the prediction (rejected "
                    f"{self.rejected_detections}; no accepted detection for {lost:.2f} s; re-initialisation needs "
@@ -378,10 +383,17 @@ class PoseEstimatorCore:
         """Snapshot at ``stamp`` [s]; None while the filter is not initialised (before K consistent detections,
         or after a reset): the node then publishes nothing, and the controller's local_state timeout applies."""
         if not self.filter.initialized:
-            why = "filter reset after a non-finite state" if self.resets else "no marker detection accepted yet"
-            self._emit("not_initialised", "warning",
-                       f"{why}: local_state not published until {self.config.reinit.consistent_detections} "
-                       f"consistent detections ({len(self.candidates)} so far)")
+            # before the first initialisation this is the normal start-up (INFO, issue 14); after a reset it is not
+            if self.resets:
+                self._emit("not_initialised", "warning",
+                           f"filter reset after a non-finite state: local_state not published until "
+                           f"{self.config.reinit.consistent_detections} consistent detections "
+                           f"({len(self.candidates)} so far); check the IMU and camera inputs")
+            elif self.initialisations == 0:
+                self._emit("not_initialised", "info",
+                           f"waiting for the marker (start-up): local_state published after "
+                           f"{self.config.reinit.consistent_detections} consistent detections "
+                           f"({len(self.candidates)} so far)")
             self._was_valid = False
             return None
         age = self.lost_time(stamp)
