@@ -16,6 +16,8 @@ import os
 import sys
 import time
 
+from rclpy.exceptions import InvalidParameterValueException
+
 from fpr_experiments.resources import UnknownNameError
 
 
@@ -193,7 +195,8 @@ def run_main(argv: list[str] | None = None) -> int:
             print(f"\nwrote {path}; {len(names)} experiments in {time.monotonic() - start:.0f} s"
                   + (f"; checks failed in: {', '.join(failed)}" if failed else "; every check passed"), flush=True)
         return status
-    except (UnknownNameError, FileNotFoundError, ValueError, TimeoutError, RuntimeError) as error:
+    except (UnknownNameError, FileNotFoundError, ValueError, TimeoutError, RuntimeError,
+            InvalidParameterValueException) as error:
         print(f"error: {error}", file=sys.stderr, flush=True)
         return 2
     except KeyboardInterrupt:
