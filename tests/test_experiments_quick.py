@@ -117,7 +117,7 @@ def _experiment_file(tmp_path, **changes) -> str:
     ("missing file", "error: unknown experiment '/no/such/experiment.yaml'; valid: "),
     ("unknown scenario", "error: unknown scenario 'nowhere'; valid: "),
     ("bad mode", "error: mode 'bogus' is not one of centralized, "),
-    ("bad node parameter", "max_thrust out of range"),
+    ("bad node parameter", "error: node parameter max_thrust = -1.0 refused: Parameter max_thrust out of range"),
     ("unknown realism flag", "error: --realism: unknown realism profile 'rough'; profiles: ideal, hardware"),
     ("unknown realism key", "error: "),
 ])

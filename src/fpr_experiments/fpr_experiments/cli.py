@@ -195,13 +195,26 @@ def run_main(argv: list[str] | None = None) -> int:
             print(f"\nwrote {path}; {len(names)} experiments in {time.monotonic() - start:.0f} s"
                   + (f"; checks failed in: {', '.join(failed)}" if failed else "; every check passed"), flush=True)
         return status
-    except (UnknownNameError, FileNotFoundError, ValueError, TimeoutError, RuntimeError,
-            InvalidParameterValueException) as error:
+    except InvalidParameterValueException as error:
+        print(f"error: {_refused_parameter_line(error)}", file=sys.stderr, flush=True)
+        return 2
+    except (UnknownNameError, FileNotFoundError, ValueError, TimeoutError, RuntimeError) as error:
         print(f"error: {error}", file=sys.stderr, flush=True)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+
+
+def _refused_parameter_line(error: Exception) -> str:
+    """One line for a node parameter rclpy refused at declaration (its descriptor range or our validator).
+
+    rclpy formats it "Invalid parameter value (V) for parameter. Reason: R: NAME" (rclpy/exceptions.py,
+    ParameterException); R already names the range."""
+    text = str(error)
+    value = text.split("(", 1)[1].split(")", 1)[0] if "(" in text else "?"
+    reason, _, name = text.split("Reason: ", 1)[-1].rpartition(": ")
+    return f"node parameter {name or '?'} = {value} refused: {reason or text}"
 
 
 def list_main(argv: list[str] | None = None) -> int:
