@@ -36,6 +36,7 @@ setup(
             'pilot = fpr_experiments.pilot_node:main',
             'info_link = fpr_experiments.info_link_node:main',
             'calibrate = fpr_experiments.calibration:main',
+            'faults = fpr_experiments.faults:main',
         ],
     },
 )

@@ -208,7 +208,9 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
                          "realism": scenario.realism}
     for i in range(1, n + 1):
         ns, group = uav_namespace(i), f"uav{i}"
-        bridge = {"uav_id": i}
+        bridge = {"uav_id": i, "n": n}
+        if info_link is not None:  # the swarm guard hears the peers' zeta as this UAV's controller does
+            bridge["info_topic"] = INFO_LINK_TOPIC.format(uav=i)
         if options.backend == "sim":  # the emulated PX4 boots at simulation time 0: exact setpoint stamps
             bridge["px4_boot_clock"] = "ros_time"
         if options.signing_key_file:

@@ -14,7 +14,7 @@ import subprocess
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from fpr_experiments.graph import NodeSpec, groups, write_graph_file
 from fpr_experiments.recording import Topic
@@ -26,11 +26,12 @@ _TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
 
 
 class _Process:
-    def __init__(self, name: str, command: list[str], log_dir: str) -> None:
+    def __init__(self, name: str, command: list[str], log_dir: str, log_name: str | None = None) -> None:
         self.name = name
         self.lines: list[str] = []
         self.ready = threading.Event()
-        self.log = open(os.path.join(log_dir, f"{name}.log"), "w", encoding="utf-8")  # noqa: SIM115 - closed
+        self.log = open(os.path.join(log_dir, f"{log_name or name}.log"), "w",  # noqa: SIM115 - closed
+                        encoding="utf-8")
         self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                         bufsize=1)
         self._thread = threading.Thread(target=self._drain, name=f"drain-{name}", daemon=True)
@@ -56,6 +57,46 @@ class _Process:
         self.log.close()
 
 
+@dataclass(frozen=True)
+class ProcessFault:
+    """Fault injection (issue 12): SIGKILL the process of ``group`` (a crash: no clean shutdown) once the
+    simulation reaches ``at`` [s]; with ``restart_after`` [s of simulation time after the kill], start the same
+    command again (a supervisor restarting the node, e.g. systemd's ``Restart=on-failure``)."""
+
+    group: str
+    at: float
+    restart_after: float | None = None
+
+
+class _FaultInjector:
+    """Applies :class:`ProcessFault` s from the runner's polling loop; ``events`` lists (what, sim time, wall)."""
+
+    def __init__(self, faults: Sequence[ProcessFault], processes: dict, commands: dict, log_dir: str) -> None:
+        unknown = sorted({f.group for f in faults} - set(commands))
+        if unknown:
+            raise ValueError(f"fault for unknown process group(s) {unknown}; groups: {', '.join(commands)}")
+        self.pending = sorted(faults, key=lambda f: f.at)
+        self.restarts: list[tuple[float, ProcessFault]] = []
+        self.processes, self.commands, self.log_dir = processes, commands, log_dir
+        self.events: list[tuple[str, float, float]] = []
+
+    def __call__(self, sim_time: float) -> None:
+        while self.pending and sim_time >= self.pending[0].at:
+            fault = self.pending.pop(0)
+            self.processes[fault.group].process.kill()
+            self.events.append((f"killed {fault.group}", sim_time, time.monotonic()))
+            if fault.restart_after is not None:
+                self.restarts.append((sim_time + fault.restart_after, fault))
+        for due, fault in list(self.restarts):
+            if sim_time >= due:
+                self.restarts.remove((due, fault))
+                old = self.processes.pop(fault.group)
+                old.stop()
+                self.processes[fault.group] = _Process(fault.group, self.commands[fault.group], self.log_dir,
+                                                       log_name=f"{fault.group}.restarted")
+                self.events.append((f"restarted {fault.group}", sim_time, time.monotonic()))
+
+
 class _Clock:
     """What the progress line needs, read from the recorder and the simulator's log."""
 
@@ -73,8 +114,11 @@ class _Clock:
 
 
 def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: float, *, output_dir: str,
-                  real_time_factor: float = 0.5, label: str = "run", log: bool = True, live_view=None):
-    """Fly ``duration`` simulated seconds; returns (recording, completed, lockstep timeouts, errors, wall)."""
+                  real_time_factor: float = 0.5, label: str = "run", log: bool = True, live_view=None,
+                  faults: Sequence[ProcessFault] = (), fault_events: list | None = None):
+    """Fly ``duration`` simulated seconds; returns (recording, completed, lockstep timeouts, errors, wall).
+    ``faults``: processes to kill (and restart) on the way; what happened when is appended to ``fault_events``
+    ((what, simulation time, wall time) tuples). A killed process's exit is not an error."""
     import rclpy
 
     from fpr_experiments.recording import Recorder
@@ -91,11 +135,12 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
     recorder = Recorder(context, topics, use_sim_time=True, live_view=live_view)
     processes: dict[str, _Process] = {}
     errors: list[str] = []
+    commands = {group: ["ros2", "run", "fpr_experiments", "node_group", "--graph", graph_file, "--group", group,
+                        "--lean"] for group in by_group if group != "simulator"}
+    injector = _FaultInjector(faults, processes, commands, log_dir) if faults else None
     try:
-        for group in by_group:
-            if group != "simulator":
-                processes[group] = _Process(group, ["ros2", "run", "fpr_experiments", "node_group", "--graph",
-                                                    graph_file, "--group", group, "--lean"], log_dir)
+        for group, command in commands.items():
+            processes[group] = _Process(group, command, log_dir)
         deadline = time.monotonic() + READY_TIMEOUT
         for name, process in processes.items():
             if not process.ready.wait(max(0.0, deadline - time.monotonic())):
@@ -116,7 +161,9 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
         next_progress = PROGRESS_PERIOD
         wall_deadline = start + 60.0 + WALL_PER_SIM_SECOND * duration
         while simulator.process.poll() is None and time.monotonic() < wall_deadline:
-            time.sleep(0.2)
+            time.sleep(0.05 if injector is not None else 0.2)
+            if injector is not None:
+                injector(clock.sim_time)
             if progress is not None and clock.sim_time >= next_progress:
                 next_progress += PROGRESS_PERIOD
                 progress()
@@ -132,6 +179,8 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
         timeouts = [int(m.group(1)) for line in simulator.lines for m in [_TIMEOUTS.search(line)] if m]
         for name, process in processes.items():
             errors += [f"{name}: {line}" for line in process.lines if line.startswith(("CALLBACK_ERROR", "Traceback"))]
+        if injector is not None and fault_events is not None:
+            fault_events.extend(injector.events)
         return recording, completed, timeouts[-1] if timeouts else clock.lockstep_timeouts, errors, wall
     finally:
         for process in processes.values():

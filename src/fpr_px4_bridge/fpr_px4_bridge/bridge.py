@@ -68,6 +68,7 @@ from fpr_px4_bridge.px4_protocol import (
     MAV_TYPE_ONBOARD_CONTROLLER,
     encode_set_attitude_target,
 )
+from fpr_px4_bridge.swarm_guard import SwarmGuard, SwarmGuardConfig, Verdict
 from fpr_px4_bridge.telemetry import TelemetryDecoder
 from fpr_px4_bridge.time_sync import SimulationBootClock
 
@@ -102,6 +103,8 @@ class BridgeConfig:
     #: "ros_time": PX4's boot clock is the ROS (simulated) clock, as for PX4 SITL in lockstep and fpr_sim's emulator
     px4_boot_clock: str = "estimate"
     offboard: OffboardConfig = OffboardConfig()
+    #: the swarm guard (issue 12's emergency response): off here, on in the node (parameter ``swarm_guard``)
+    guard: SwarmGuardConfig = SwarmGuardConfig(enabled=False)
 
     def __post_init__(self) -> None:
         if self.px4_boot_clock not in ("estimate", "ros_time"):
@@ -158,6 +161,9 @@ class BridgeStatus:
     rejected_setpoints: int
     thrust_refusals: int = 0  #: of rejected_setpoints: thrust above the ceiling
     thrust_saturations: int = 0  #: setpoints in (f_max, ceiling]: flown at normalized 1.0
+    emergency: bool = False  #: in the swarm's emergency response (state EMERGENCY)
+    emergency_own: bool = False  #: ... for a cause of this UAV's own (the peers follow it)
+    emergency_reason: str = ""
 
 
 @dataclass
@@ -175,6 +181,8 @@ class Px4Bridge:
         self.config = config
         self.link = link
         self.machine = OffboardStateMachine(config.offboard)
+        self.guard = SwarmGuard(config.guard)
+        self.verdict: Verdict | None = None  #: the guard's latest (None: guard off)
         self.telemetry = TelemetryDecoder(SimulationBootClock() if config.px4_boot_clock == "ros_time" else None)
         self.boot_time = boot_time  # local time that our time_boot_ms counts from
         self._setpoint: _Setpoint | None = None
@@ -346,7 +354,16 @@ class Px4Bridge:
 
     def tick(self, now: float) -> list[LogEvent]:
         """Periodic step at ``stream_rate`` (time ``now`` [s]): state machine, stream slots, commands, HEARTBEAT."""
-        decision = self.machine.step(now, self.setpoint_fresh(now))
+        fresh = self.setpoint_fresh(now)
+        self.verdict = None
+        if self.config.guard.enabled:
+            self._feed_guard_from_telemetry(now)
+            flying = self.machine.state in (BridgeState.OFFBOARD, BridgeState.EMERGENCY, BridgeState.WARMUP) and \
+                self.machine.armed
+            self.verdict = self.guard.evaluate(now, fresh, flying)
+            if not self.machine.armed:
+                self.guard.reset_latch()
+        decision = self.machine.step(now, fresh, self.verdict)
         self._stream_slots(now, decision.stream)
         cfg = self.config
         for command in decision.commands:
@@ -363,6 +380,17 @@ class Px4Bridge:
                 type=MAV_TYPE_ONBOARD_CONTROLLER, autopilot=MAV_AUTOPILOT_INVALID, base_mode=0, custom_mode=0,
                 system_status=MAV_STATE_ACTIVE))
         return decision.events + self.take_events()
+
+    def _feed_guard_from_telemetry(self, now: float) -> None:
+        """The envelope inputs of the swarm guard: PX4's local position (height, climb rate) and the tilt."""
+        position = self.telemetry.local_position
+        attitude = self.telemetry.attitude
+        if position is None or attitude is None or now - position.stamp > 0.5:
+            return
+        w, x, y, z = attitude
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+        self.guard.on_local_position(position.height, position.climb_rate, tilt, self.machine.armed,
+                                     not self.machine.armed, now)
 
     # ---- reception -----------------------------------------------------------------------------------------
     def handle_message(self, msg, now: float):
@@ -416,6 +444,10 @@ class Px4Bridge:
             rejected_setpoints=self.rejected_setpoints,
             thrust_refusals=self.thrust_refusals,
             thrust_saturations=self.thrust_saturations,
+            emergency=machine.state == BridgeState.EMERGENCY,
+            emergency_own=machine.state == BridgeState.EMERGENCY and machine.emergency is not None
+            and machine.emergency.own,
+            emergency_reason=machine.emergency.reason if machine.emergency is not None else "",
         )
 
     @property

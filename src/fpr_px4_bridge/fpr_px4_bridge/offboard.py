@@ -10,7 +10,19 @@ after ``offboard_warmup`` >= 1 s of continuous stream: DO_SET_MODE OFFBOARD, ret
 OFFBOARD, spec px4_ros_facts.md §1.4-1.5) -> OFFBOARD. LAND -> LANDING (DO_SET_MODE AUTO.LAND until the
 HEARTBEAT shows it; IDLE once disarmed). KILL -> KILLED (forced disarm, optionally flight termination, latched
 until IDLE). FAILSAFE: in OFFBOARD the setpoints went stale (the stream stops so that PX4's own offboard-loss
-failsafe acts) or PX4 left OFFBOARD / disarmed on its own; latched until the operator changes the mode.
+failsafe acts) or PX4 left OFFBOARD / disarmed on its own; latched until the operator changes the mode. With
+the swarm guard (:mod:`fpr_px4_bridge.swarm_guard`, a :class:`~fpr_px4_bridge.swarm_guard.Verdict` passed to
+:meth:`OffboardStateMachine.step`) the stale setpoints and PX4 leaving OFFBOARD lead to EMERGENCY instead:
+
+EMERGENCY (issue 12, the swarm's emergency response; README "Emergency response"): entered from OFFBOARD on any
+emergency verdict (own or a peer's). The bridge puts PX4 in Hold (DO_SET_MODE AUTO.LOITER: PX4's position
+control holds this UAV where it is, and with every UAV holding, the structure keeps its shape) and keeps the
+setpoint stream going while the controller delivers (PX4 ignores it in Hold; it lets OFFBOARD resume at once).
+Then either the cause clears (and stays clear ``rejoin_delay``) while the operator still says FLY: WARMUP ->
+OFFBOARD, the UAV rejoins without anybody landing; or it persists ``emergency_hold_time`` (or is latched: the
+flight envelope) and the bridge commands AUTO.LAND (the whole swarm lands in shape, each UAV holding its x/y);
+IDLE once disarmed. PX4 already in AUTO.LAND on its own (its failsafe) is left landing. The operator's LAND /
+KILL / IDLE override the emergency as everywhere.
 DISCONNECTED ("PX4 silent") is reported whenever no frame at all came from PX4 for ``heartbeat_timeout`` (0.45 s;
 PX4 streams telemetry at >= 50 Hz but HEARTBEAT only at 1-2 Hz, so silence is judged on ANY frame from the
 autopilot, not on HEARTBEATs; the next tick logs it: within 0.5 s of the last frame at 50 Hz), and until the
@@ -51,6 +63,7 @@ from fpr_px4_bridge.px4_protocol import (
     is_armed,
     set_mode_params,
 )
+from fpr_px4_bridge.swarm_guard import Cause, Verdict
 
 __all__ = ["BridgeState", "CommandRequest", "Decision", "LogEvent", "OffboardConfig", "OffboardStateMachine",
            "TeleopMode"]
@@ -67,6 +80,7 @@ class BridgeState(IntEnum):
     LANDING = 5
     KILLED = 6
     FAILSAFE = 7
+    EMERGENCY = 8
 
 
 class TeleopMode(IntEnum):
@@ -88,12 +102,18 @@ class OffboardConfig:
     command_retry_interval: float = 0.5  #: [s] between retries of an unconfirmed command
     command_max_attempts: int = 6        #: attempts of ARM / OFFBOARD / LAND before giving up (kill never gives up)
     kill_flight_termination: bool = False  #: also send DO_FLIGHTTERMINATION on KILL (PX4 needs a reboot after)
+    #: [s] EMERGENCY: Hold this long waiting for the cause to clear, then AUTO.LAND (= PX4's COM_FAIL_ACT_T, 5 s,
+    #: so that a UAV whose bridge died, in PX4's own Hold-then-Land failsafe, lands with the others)
+    emergency_hold_time: float = 5.0
+    rejoin_delay: float = 0.5            #: [s] EMERGENCY: the cause must stay clear this long before rejoining
 
     def __post_init__(self) -> None:
         if self.offboard_warmup < 1.0:
             raise ValueError("offboard_warmup must be >= 1.0 s (PX4 needs > 1 s of stream before OFFBOARD)")
         if self.heartbeat_timeout <= 0.0 or self.command_retry_interval <= 0.0 or self.command_max_attempts < 1:
             raise ValueError("heartbeat_timeout and command_retry_interval must be > 0, command_max_attempts >= 1")
+        if not (0.0 <= self.emergency_hold_time < 600.0 and 0.0 <= self.rejoin_delay < 60.0):
+            raise ValueError("emergency_hold_time must be in [0, 600) s and rejoin_delay in [0, 60) s")
 
 
 @dataclass(frozen=True)
@@ -130,9 +150,11 @@ FORCE_DISARM = CommandRequest(MAV_CMD_COMPONENT_ARM_DISARM, _params(0.0, FORCE_D
 SET_OFFBOARD = CommandRequest(MAV_CMD_DO_SET_MODE, _params(*set_mode_params(Px4MainMode.OFFBOARD)), "OFFBOARD")
 SET_LAND = CommandRequest(MAV_CMD_DO_SET_MODE, _params(*set_mode_params(Px4MainMode.AUTO, Px4AutoSubMode.LAND)),
                           "AUTO.LAND")
+SET_HOLD = CommandRequest(MAV_CMD_DO_SET_MODE,
+                          _params(*set_mode_params(Px4MainMode.AUTO, Px4AutoSubMode.LOITER)), "AUTO.LOITER")
 TERMINATE = CommandRequest(MAV_CMD_DO_FLIGHTTERMINATION, _params(1.0), "FLIGHT_TERMINATION")
 
-_STREAMING_STATES = (BridgeState.ARMING, BridgeState.WARMUP, BridgeState.OFFBOARD)
+_STREAMING_STATES = (BridgeState.ARMING, BridgeState.WARMUP, BridgeState.OFFBOARD, BridgeState.EMERGENCY)
 
 
 class OffboardStateMachine:
@@ -159,6 +181,11 @@ class OffboardStateMachine:
         #: the operator's IDLE after ARM / FLY / LAND: DISARM while PX4 is armed, until this time (None: never)
         self._disarm_until: float | None = None
         self._armed_idle_reported = False
+        self._emergency_since: float | None = None  #: [s] entry into EMERGENCY
+        self._emergency_landing = False  #: EMERGENCY: the hold is over, AUTO.LAND commanded
+        self._clear_since: float | None = None  #: [s] EMERGENCY: the cause has been clear since
+        self._rejoining = False  #: WARMUP after an EMERGENCY (a new verdict sends it back)
+        self.emergency: Verdict | None = None  #: the verdict that holds the EMERGENCY (None outside it)
 
     # ---- inputs ----------------------------------------------------------------------------------------
     @property
@@ -195,6 +222,20 @@ class OffboardStateMachine:
             self._last_sent.clear()
             self._seen_offboard = False
             self._seen_land = False
+            self._rejoining = False
+            if state != BridgeState.EMERGENCY:
+                self.emergency = None
+
+    def _enter_emergency(self, now: float, verdict: Verdict, context: str = "") -> None:
+        """OFFBOARD (or a rejoin) -> EMERGENCY: PX4 Hold now, AUTO.LAND after emergency_hold_time (module doc)."""
+        source = "own fault" if verdict.own else "following the swarm"
+        self._enter(BridgeState.EMERGENCY, "error",
+                    f"swarm emergency ({source}{context}): {verdict.reason}; PX4 Hold now, AUTO.LAND after "
+                    f"{self.config.emergency_hold_time:g} s unless it clears")
+        self.emergency = verdict
+        self._emergency_since = now
+        self._emergency_landing = False
+        self._clear_since = None
 
     def on_frame(self, now: float) -> None:
         """Any accepted frame from the PX4 autopilot at ``now`` [s] (telemetry, ACK, HEARTBEAT): proof of life."""
@@ -253,8 +294,8 @@ class OffboardStateMachine:
             else:
                 self._enter(BridgeState.IDLE, "info", "LAND while disarmed: nothing to land")
         elif new in (TeleopMode.ARM, TeleopMode.FLY):
-            if state == BridgeState.OFFBOARD:
-                return  # FLY -> ARM while flying keeps flying; the operator lands or kills explicitly
+            if state in (BridgeState.OFFBOARD, BridgeState.EMERGENCY):
+                return  # FLY -> ARM while flying keeps flying (an emergency keeps running); LAND / KILL override
             if self.armed:
                 self._enter(BridgeState.WARMUP, "info", "armed: streaming")
             else:
@@ -276,8 +317,9 @@ class OffboardStateMachine:
         return True
 
     # ---- step ----------------------------------------------------------------------------------------------
-    def step(self, now: float, setpoint_fresh: bool) -> Decision:
-        """Advance at time ``now``; ``setpoint_fresh``: a valid setpoint younger than setpoint_timeout exists."""
+    def step(self, now: float, setpoint_fresh: bool, verdict: Verdict | None = None) -> Decision:
+        """Advance at time ``now``; ``setpoint_fresh``: a valid setpoint younger than setpoint_timeout exists;
+        ``verdict``: the swarm guard's (None: no guard, the FAILSAFE behaviour of the module doc)."""
         decision = Decision(stream=False)
         connected = self.connected(now)
         if connected != self._was_connected:
@@ -298,7 +340,10 @@ class OffboardStateMachine:
                 self._enter(BridgeState.IDLE, "error",
                             f"arming failed after {self.config.command_max_attempts} attempts")
         elif state == BridgeState.WARMUP:
-            if self.custom_mode_seen and not self.armed and connected:
+            if self._rejoining and verdict is not None and verdict.emergency:
+                self._enter_emergency(now, verdict, ", again while rejoining")
+                self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
+            elif self.custom_mode_seen and not self.armed and connected:
                 self._enter(BridgeState.IDLE, "warn", "PX4 disarmed during warm-up")
             elif offboard and self._stream_since is not None:
                 self._enter(BridgeState.OFFBOARD, "info", "PX4 reports OFFBOARD")
@@ -312,13 +357,23 @@ class OffboardStateMachine:
                     self._enter(BridgeState.FAILSAFE, "error",
                                 f"PX4 did not enter OFFBOARD after {self.config.command_max_attempts} requests")
         elif state == BridgeState.OFFBOARD:
-            if not setpoint_fresh:
+            if connected and not self.armed:
+                self._enter(BridgeState.FAILSAFE, "error", "PX4 disarmed in OFFBOARD")
+            elif verdict is not None and verdict.emergency:
+                self._enter_emergency(now, verdict)
+                self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
+            elif not setpoint_fresh:
                 self._enter(BridgeState.FAILSAFE, "error",
                             "setpoints stale: stream stopped, PX4 offboard-loss failsafe takes over")
             elif connected and not offboard:
-                self._enter(BridgeState.FAILSAFE, "error", f"PX4 left OFFBOARD on its own ({self.px4_mode.name})")
-            elif connected and not self.armed:
-                self._enter(BridgeState.FAILSAFE, "error", "PX4 disarmed in OFFBOARD")
+                text = f"PX4 left OFFBOARD on its own ({self.px4_mode.name})"
+                if verdict is not None:
+                    self._enter_emergency(now, Verdict(Cause.PX4, text))
+                    self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
+                else:
+                    self._enter(BridgeState.FAILSAFE, "error", text)
+        elif state == BridgeState.EMERGENCY:
+            self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
         elif state == BridgeState.LANDING:
             self._seen_land = self._seen_land or self.px4_mode.is_land
             if not self.armed and connected:
@@ -344,6 +399,47 @@ class OffboardStateMachine:
         decision.events = self._events
         self._events = []
         return decision
+
+    def _emergency_step(self, now: float, connected: bool, setpoint_fresh: bool, verdict: Verdict | None,
+                        decision: Decision) -> None:
+        """EMERGENCY (module doc): Hold, then AUTO.LAND after emergency_hold_time, or rejoin once clear."""
+        cfg = self.config
+        if self.custom_mode_seen and not self.armed and connected:
+            self._enter(BridgeState.IDLE, "info", "disarmed during the emergency response (landed)")
+            return
+        active = verdict is not None and verdict.emergency
+        held = self.emergency or Verdict(Cause.PEER, "unknown")
+        if active:
+            self.emergency = verdict
+            self._clear_since = None
+        elapsed = now - (self._emergency_since if self._emergency_since is not None else now)
+        if not self._emergency_landing and self.px4_mode.is_land:
+            self._emergency_landing = True
+            self._event("warn", "emergency.px4_land", f"emergency: PX4 is landing on its own "
+                        f"({self.px4_mode.name}, its failsafe): landing with it")
+        if not self._emergency_landing:
+            if active and elapsed >= cfg.emergency_hold_time:
+                self._emergency_landing = True
+                self._event("error", "emergency.land", f"emergency: {verdict.reason} still after {elapsed:.1f} s "
+                            f"(emergency_hold_time {cfg.emergency_hold_time:g} s): AUTO.LAND")
+            elif not active:
+                if self._clear_since is None:
+                    self._clear_since = now
+                    self._event("info", "emergency.clear", f"emergency: cause clear (was: {held.reason}); "
+                                f"rejoining if it stays clear {cfg.rejoin_delay:g} s")
+                if now - self._clear_since >= cfg.rejoin_delay and self.mode == TeleopMode.FLY and setpoint_fresh:
+                    self._enter(BridgeState.WARMUP, "warn", f"emergency over after {elapsed:.1f} s (was: "
+                                f"{held.reason}): rejoining, OFFBOARD once the stream has run "
+                                f"{cfg.offboard_warmup:g} s")
+                    self._rejoining = True
+                    return
+        if self._emergency_landing:
+            if not self.px4_mode.is_land and not self._request(SET_LAND, now, decision):
+                self._event("error", "land.failed", "PX4 did not enter AUTO.LAND: land it manually or KILL")
+        elif not (self.px4_mode.is_hold or self.px4_mode.is_land) and not self._request(SET_HOLD, now, decision):
+            self._emergency_landing = True
+            self._event("error", "emergency.hold_failed", f"PX4 did not enter Hold after "
+                        f"{cfg.command_max_attempts} requests: AUTO.LAND")
 
     def _idle_step(self, now: float, decision: Decision) -> None:
         """IDLE: DISARM only for the operator's explicit IDLE (module doc); an armed PX4 is otherwise reported."""

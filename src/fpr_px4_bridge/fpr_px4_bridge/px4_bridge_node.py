@@ -30,10 +30,11 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import BatteryState, Imu
 
-from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus
+from fpr_msgs.msg import AttitudeThrustSetpoint, ControllerStatus, InformationVector, TeleopCommand, UavStatus
 from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge
 from fpr_px4_bridge.link import MavlinkLink, load_signing_key
 from fpr_px4_bridge.offboard import LogEvent, OffboardConfig
+from fpr_px4_bridge.swarm_guard import SwarmGuardConfig
 from fpr_px4_bridge.telemetry import BatterySample, BodyVelocitySample, ImuSample
 
 _PARAMETERS = {
@@ -87,6 +88,30 @@ _PARAMETERS = {
                             choices=("auto", "estimate", "ros_time")),
     "receive_thread": (True, "read MAVLink in a thread of its own (true: on a robot, ros2 run); false: the owner "
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
+    "n": Param(3, "number of UAVs of the robot: the swarm guard watches the peers' status uav<j>/status, j != uav_id",
+               low=1, high=64),
+    "swarm_guard": (False, "the swarm's emergency response (README 'Emergency response'): on a fault of this UAV or "
+                          "a peer, PX4 Hold, then AUTO.LAND after emergency_hold_time, or rejoin once clear; false: "
+                          "stale setpoints only stop the stream (PX4's offboard-loss failsafe acts alone)"),
+    "emergency_hold_time": Param(5.0, "[s] the emergency's Hold before AUTO.LAND: set PX4's COM_FAIL_ACT_T to the "
+                                 "same value (a UAV whose bridge died lands with the others)", high=600.0),
+    "rejoin_delay": Param(0.5, "[s] an emergency's cause must stay clear this long before the UAV rejoins", high=60.0),
+    "info_topic": ("/fpr/info", "InformationVector topic the controllers read (proof of life of each peer's "
+                                "controller for the swarm guard)"),
+    "peer_status_topic": ("/fpr/uav{uav}/status", "UavStatus topic of UAV {uav} (the peers' bridges)"),
+    "estimate_deadline": Param(0.3, "[s] own controller_status without a valid local state this long: emergency "
+                               "(pose estimator dead or blind)", low=0.02, high=60.0),
+    "peer_status_deadline": Param(1.0, "[s] a peer's status this old while its zeta arrives: its bridge died: "
+                                  "emergency", low=0.05, high=60.0),
+    "peer_silence_deadline": Param(5.0, "[s] neither status nor zeta from a peer this long: emergency (longer than "
+                                   "the link outages the NC fallback (4.32) rides out)", low=0.1, high=600.0),
+    "max_height": Param(10.0, "[m] flight envelope: height above the take-off point (PX4 local position)",
+                        low=0.1, high=10000.0),
+    "max_climb_rate": Param(2.0, "[m/s] flight envelope: climb rate, for envelope_time", low=0.1, high=100.0),
+    "max_tilt_deg": Param(60.0, "[deg] flight envelope: UAV tilt, for envelope_time (PX4 FD_FAIL_R / FD_FAIL_P)",
+                          low=1.0, high=179.0),
+    "envelope_time": Param(0.3, "[s] an envelope excess must last this long (PX4 FD_FAIL_R_TTRI)", low=0.01,
+                           high=60.0),
     "wall_silence_timeout": (0.8, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
                                   "simulator) is reported lost even though /clock stopped with it; 0: off. Runs "
                                   "with the receive thread (the deterministic runner owns the timing)"),
@@ -145,7 +170,14 @@ class Px4BridgeNode(Node):
                 heartbeat_timeout=float(p["heartbeat_timeout"]), offboard_warmup=float(p["offboard_warmup"]),
                 command_retry_interval=float(p["command_retry_interval"]),
                 command_max_attempts=int(p["command_max_attempts"]),
-                kill_flight_termination=bool(p["kill_flight_termination"])))
+                kill_flight_termination=bool(p["kill_flight_termination"]),
+                emergency_hold_time=float(p["emergency_hold_time"]), rejoin_delay=float(p["rejoin_delay"])),
+            guard=SwarmGuardConfig(
+                enabled=bool(p["swarm_guard"]), uav_id=uav_id, estimate_deadline=float(p["estimate_deadline"]),
+                peer_status_deadline=float(p["peer_status_deadline"]),
+                peer_silence_deadline=float(p["peer_silence_deadline"]), max_height=float(p["max_height"]),
+                max_climb_rate=float(p["max_climb_rate"]), max_tilt_deg=float(p["max_tilt_deg"]),
+                envelope_time=float(p["envelope_time"])))
         url = p["connection_url"] or f"udp://127.0.0.1:{14540 + uav_id - 1}"
         key = load_signing_key(p["signing_key_file"]) if p["signing_key_file"] else None
         self.link = MavlinkLink(url, system_id=int(p["system_id"]) or target_system,
@@ -159,6 +191,13 @@ class Px4BridgeNode(Node):
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint, best_effort)
         self.create_subscription(TeleopCommand, p["teleop_topic"], self._on_teleop, best_effort)
+        if self.config.guard.enabled:
+            self.create_subscription(InformationVector, p["info_topic"], self._on_info, best_effort)
+            self.create_subscription(ControllerStatus, "controller_status", self._on_controller_status, best_effort)
+            for j in range(1, int(p["n"]) + 1):
+                if j != uav_id:
+                    self.create_subscription(UavStatus, str(p["peer_status_topic"]).format(uav=j),
+                                             self._on_peer_status, best_effort)
         # REP-2003: sensor publishers reliable (the system default), so that any subscriber can connect; the
         # subscribers (pose_estimator, controller) use the sensor-data profile
         self.imu_pub = self.create_publisher(Imu, "imu", 10)
@@ -220,6 +259,20 @@ class Px4BridgeNode(Node):
             events = self.bridge.take_events()
         self._log.emit(events)
 
+    def _on_info(self, msg: InformationVector) -> None:
+        with self._lock:
+            self.bridge.guard.on_info(msg.uav_id, self._now())
+
+    def _on_controller_status(self, msg: ControllerStatus) -> None:
+        if msg.uav_id == self.config.uav_id:
+            with self._lock:
+                self.bridge.guard.on_own_controller_status(bool(msg.local_state_valid), self._now())
+
+    def _on_peer_status(self, msg: UavStatus) -> None:
+        with self._lock:
+            self.bridge.guard.on_peer_status(msg.uav_id, msg.state, msg.emergency_own, msg.emergency_reason,
+                                             self._now())
+
     def _on_tick(self) -> None:
         with self._lock:
             events = self.bridge.tick(self._now())
@@ -245,6 +298,7 @@ class Px4BridgeNode(Node):
         msg.setpoint_rate = float(s.setpoint_rate)
         msg.rx_garbage = min(s.rx_garbage, 0xFFFFFFFF)
         msg.rejected_setpoints = min(s.rejected_setpoints, 0xFFFFFFFF)
+        msg.emergency, msg.emergency_own, msg.emergency_reason = s.emergency, s.emergency_own, s.emergency_reason
         self.status_pub.publish(msg)
         self._publish_diagnostics(msg)
 
@@ -256,9 +310,12 @@ class Px4BridgeNode(Node):
             return
         self._next_diagnostics = now + 1.0
         state = self._state_names.get(status.state, str(status.state))
-        if not status.connected or status.state in (UavStatus.STATE_FAILSAFE, UavStatus.STATE_KILLED):
+        if not status.connected or status.state in (UavStatus.STATE_FAILSAFE, UavStatus.STATE_KILLED,
+                                                    UavStatus.STATE_EMERGENCY):
             level = ERROR
             message = "PX4 not heard" if not status.connected else f"{state} (PX4 {status.mode_name})"
+            if status.emergency:
+                message += f": {status.emergency_reason}"
         elif status.state in (UavStatus.STATE_ARMING, UavStatus.STATE_WARMUP, UavStatus.STATE_LANDING) \
                 or status.rejected_setpoints > self._rejected_reported:
             level, message = WARN, f"{state} (PX4 {status.mode_name})"

@@ -212,6 +212,11 @@ class Px4Mode:
     def is_land(self) -> bool:
         return self.main_mode == Px4MainMode.AUTO and self.sub_mode == Px4AutoSubMode.LAND
 
+    @property
+    def is_hold(self) -> bool:
+        """AUTO.LOITER (PX4's Hold)."""
+        return self.main_mode == Px4MainMode.AUTO and self.sub_mode == Px4AutoSubMode.LOITER
+
 
 def encode_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
     """HEARTBEAT ``custom_mode`` of a PX4 (main, sub) mode: ``main << 16 | sub << 24``."""

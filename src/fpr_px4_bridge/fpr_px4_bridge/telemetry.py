@@ -19,7 +19,7 @@ from fpr_model.rotations import quat_conjugate, quat_rotate
 
 from fpr_px4_bridge.time_sync import BootTimeMapper
 
-__all__ = ["BatterySample", "BodyVelocitySample", "ImuSample", "TelemetryDecoder"]
+__all__ = ["BatterySample", "BodyVelocitySample", "ImuSample", "LocalPositionSample", "TelemetryDecoder"]
 
 _MAV_FRAME_LOCAL_NED = 1
 _MAV_FRAME_BODY_FRD = 12
@@ -48,6 +48,15 @@ class BodyVelocitySample:
 
 
 @dataclass(frozen=True)
+class LocalPositionSample:
+    """PX4's local position, as far as the swarm guard's flight envelope needs it."""
+
+    stamp: float                      #: [s] local time
+    height: float                     #: [m] up (−z of LOCAL_POSITION_NED), from PX4's local origin
+    climb_rate: float                 #: [m/s] up (−vz)
+
+
+@dataclass(frozen=True)
 class BatterySample:
     stamp: float                      #: [s] local receive time
     voltage: float                    #: [V], NaN unknown
@@ -70,6 +79,7 @@ class TelemetryDecoder:
         self._accel: np.ndarray | None = None
         self._accel_stamp = -math.inf
         self.battery: BatterySample | None = None
+        self.local_position: LocalPositionSample | None = None  #: latest LOCAL_POSITION_NED (height, climb)
         self.invalid_values = 0  # telemetry dropped because of NaN/inf/zero quaternion
 
     def _boot_ms_stamp(self, time_boot_ms: int, received: float) -> float:
@@ -148,6 +158,8 @@ class TelemetryDecoder:
                 self.invalid_values += 1
             return None
         stamp = self._boot_ms_stamp(msg.time_boot_ms, received)
+        if math.isfinite(msg.z):
+            self.local_position = LocalPositionSample(stamp=received, height=-float(msg.z), climb_rate=-float(v[2]))
         v_flu = quat_rotate(quat_conjugate(self.attitude), ned_to_enu(v))
         return BodyVelocitySample(stamp=stamp, linear=v_flu, angular=self.rates)
 

@@ -26,6 +26,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
 from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus  # noqa: E402
+from fpr_px4_bridge import px4_protocol as p  # noqa: E402
 
 Q_NORTH = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # w, x, y, z
 SETPOINT_TIMEOUT = 0.2
@@ -108,6 +109,17 @@ class SimTime:
 
 @pytest.fixture
 def graph(fake_px4_factory, free_port):
+    """The bridge alone (no swarm guard: its former stale-setpoint FAILSAFE), a fake PX4, a /clock."""
+    yield from _graph(fake_px4_factory, free_port, swarm_guard=False)
+
+
+@pytest.fixture
+def guarded_graph(fake_px4_factory, free_port):
+    """The same with the swarm guard on."""
+    yield from _graph(fake_px4_factory, free_port, swarm_guard=True)
+
+
+def _graph(fake_px4_factory, free_port, swarm_guard: bool):
     context = rclpy.Context()
     rclpy.init(context=context)
     port = free_port
@@ -120,6 +132,7 @@ def graph(fake_px4_factory, free_port):
         Parameter("offboard_warmup", value=1.0),
         Parameter("status_rate", value=20.0),
         Parameter("px4_boot_clock", value="estimate"),  # the time-sync estimate under test (auto: exact ros_time)
+        Parameter("swarm_guard", value=swarm_guard),
     ])
     helper = rclpy.create_node("px4_bridge_test_helper", context=context, parameter_overrides=sim_time)
     executor = SingleThreadedExecutor(context=context)
@@ -248,6 +261,36 @@ def test_fly_stream_rate_offboard_after_warmup_and_stale_stop(graph):
     # telemetry made it to ROS in ENU/FLU
     assert imus and imus[-1].linear_acceleration.z == pytest.approx(9.81, abs=1e-5)
     assert imus[-1].orientation.z == pytest.approx(math.sin(math.pi / 4), abs=1e-6)
+
+
+def test_swarm_guard_stale_setpoints_hold_then_rejoin_when_the_controller_is_back(guarded_graph):
+    """Issue 12: the controller dies in OFFBOARD -> EMERGENCY (own), PX4 asked for Hold (AUTO.LOITER) at once and
+    said in the status; the controller back -> rejoin: OFFBOARD requested again after rejoin_delay."""
+    node, fake, sim, teleop_pub, statuses, imus = guarded_graph
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
+    teleop_pub.publish(teleop(TeleopCommand.MODE_FLY))
+    sim.run_until(lambda: fake.armed, 2.0, "armed")
+    sim.setpoint = setpoint()
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD, 3.0, "OFFBOARD")
+    sim.setpoint = None
+    stopped = sim.now
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_EMERGENCY, 1.0, "EMERGENCY")
+    status = statuses[-1]
+    assert status.emergency and status.emergency_own and "setpoints stale" in status.emergency_reason
+    holds = [c for c in fake.command_list() if c.msg.command == 176 and int(c.msg.param2) == p.Px4MainMode.AUTO
+             and int(c.msg.param3) == p.Px4AutoSubMode.LOITER]
+    assert holds and holds[0].t - stopped <= SETPOINT_TIMEOUT + 2.0 / STREAM_RATE + 0.05
+    sim.run_until(lambda: fake.custom_mode == p.encode_custom_mode(p.Px4MainMode.AUTO, p.Px4AutoSubMode.LOITER),
+                  1.0, "PX4 in Hold")
+    sim.run_for(1.0)
+    assert statuses[-1].state == UavStatus.STATE_EMERGENCY  # still holding: no landing before the hold time
+    sim.setpoint = setpoint()  # the controller restarted
+    back = sim.now
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD, 3.0, "rejoined")
+    offboard_requests = [c for c in fake.command_list() if c.msg.command == 176 and int(c.msg.param2) ==
+                         p.Px4MainMode.OFFBOARD and c.t > back]
+    assert offboard_requests and offboard_requests[0].t - back >= 0.5 - 0.05  # rejoin_delay
+    assert not statuses[-1].emergency and statuses[-1].emergency_reason == ""
 
 
 def test_bad_setpoints_never_reach_the_peer_and_garbage_is_counted(graph, corrupt_datagrams):

@@ -357,6 +357,9 @@ class Px4Emulator:
         self.peer: tuple[str, int] | None = ("127.0.0.1", remote_port) if remote_port > 0 else None
         self.peer_latched = False  #: the partner was taken from a received frame (PX4: client source initialized)
         self.counters = EmulatorCounters()
+        #: called with (sim time, uav id, raw thrust, raw q) for every SET_ATTITUDE_TARGET addressed to this PX4,
+        #: before validation (fpr_sim.px4_log); None: off
+        self.input_log: Callable[[float, int, float, object], None] | None = None
         self.armed = False
         self.main_mode = Px4MainMode.POSCTL
         self.sub_mode = 0
@@ -492,6 +495,8 @@ class Px4Emulator:
         if not self._for_me(msg):
             self.counters.ignored += 1
             return
+        if self.input_log is not None:
+            self.input_log(self.time, self.uav_id, msg.thrust, msg.q)
         mask = int(msg.type_mask)
         q_ned = np.asarray(msg.q, dtype=float)
         thrust = float(msg.thrust)

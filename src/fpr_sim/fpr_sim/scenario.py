@@ -132,7 +132,7 @@ class Px4Config:
     max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
     controller_rate: float = 250.0  #: attitude/rate loop [Hz]
     offboard_loss_timeout: float = 1.0  #: COM_OF_LOSS_T [s]: offboard signal = a setpoint younger than this
-    failsafe_hold_time: float = 2.0  #: offboard/RC loss: Hold this long before Land [s] (PX4 COM_FAIL_ACT_T)
+    failsafe_hold_time: float = 5.0  #: offboard/RC loss: Hold this long before Land [s] (PX4 COM_FAIL_ACT_T, 5 s)
     land_disarm_delay: float = 2.0  #: COM_DISARM_LAND: disarm after this long landed (LAND, or after flight) [s]
     disarm_preflight_timeout: float = 10.0  #: COM_DISARM_PRFLT: disarm if armed this long without take-off [s]
     rc_loss_timeout: float = 0.5  #: COM_RC_LOSS_T: airborne in a manual-like mode, no RC -> failsafe after [s]

@@ -40,6 +40,7 @@ from fpr_msgs.msg import FprState, MarkerDetection
 from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
 from fpr_sim.plant import GroundTruth
+from fpr_sim.px4_log import Px4Log
 from fpr_sim.scenario import load_scenario, realism_profiles
 from fpr_sim.sensors import DelayLine, MotionCapture
 from fpr_sim.simulation import Simulation, SimulationOptions
@@ -98,6 +99,9 @@ class SimulatorNode(Node):
         p("signing_key_file", "", (
             "MAVLink 2 signing key of every emulated PX4 (64 hex digits or 32 bytes, as px4_bridge's): frames signed, "
             "unsigned input refused; empty: no signing (PX4's default)"))
+        p("px4_log_file", "", (
+            "CSV of every SET_ATTITUDE_TARGET the emulated PX4s receive (raw thrust, quaternion) and every arming / "
+            "mode change, simulation time (fpr_sim.px4_log: fault-injection evidence); empty: off"))
         p("duration", 0.0, "stop after this simulated time [s]; 0 = run until shutdown", high=1e7)
         p("wait_for_clock_subscribers", 0, (
             "run(): before the first step, wait until /clock has this many subscriptions (every simulated-time node "
@@ -116,6 +120,8 @@ class SimulatorNode(Node):
                                     signing_key=load_signing_key(str(get("signing_key_file").value))
                                     if get("signing_key_file").value else None)
         self.sim = Simulation(self.scenario, options)
+        log_file = str(get("px4_log_file").value)
+        self.px4_log = Px4Log(log_file, self.sim.emulators) if log_file else None
         self.sim.on_notice = self.get_logger().warning
         self.real_time_factor = max(0.0, float(get("real_time_factor").value))
         self.clock_period = 1.0 / min(250.0, max(1.0, float(get("clock_rate").value)))
@@ -208,6 +214,8 @@ class SimulatorNode(Node):
         if not rclpy.ok(context=self.context):
             return False  # shut down (SIGINT/SIGTERM) while stepping: publishing now would raise
         t = self.sim.time
+        if self.px4_log is not None:
+            self.px4_log.sample(t)
         self.clock_pub.publish(Clock(clock=_stamp(t)))
         if t + 1e-9 >= self._next_truth:
             self._next_truth += self.truth_period
@@ -385,6 +393,8 @@ class SimulatorNode(Node):
             self._publish_later(due, self.info_pubs[i], info)
 
     def destroy_node(self) -> None:
+        if self.px4_log is not None:
+            self.px4_log.close()
         self.sim.close()
         super().destroy_node()
 

@@ -1,0 +1,305 @@
+"""Fault injection in the multi-process graph (issue 12): kill one node of one UAV mid-hover, optionally restart
+it, and measure what the robot did — from the ground truth and from every SET_ATTITUDE_TARGET and mode change
+of the emulated PX4s (the simulator's ``px4_log_file``, :mod:`fpr_sim.px4_log`).
+
+The flight: the ``hover`` scenario (armed in OFFBOARD at 1.5 m, legs 45°), the ``integration_hover`` joy script
+(ARM + FLY, climb 2 s at 0.3 m/s to ~2.1 m, hold), mode C, emulated cameras, the graph as on the robot (one
+process per UAV, ground, simulator) except that the victim node runs in a process of its own, so that it can
+die alone (SIGKILL: no clean shutdown, as a crash). Lockstep with ``lockstep_on_timeout: continue`` and a 1 s
+watchdog: a dead stream is waited for once, then the simulation flies on without it (PX4's failsafes play out
+in simulation time).
+
+Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simulation time):
+
+- ``max_tilt_deg``: the platform's largest tilt (angle between its z axis and the vertical) [°];
+- ``max_climb_m``: the largest height any UAV reached above its own height at t_f [m];
+- ``all_disarmed_s``: from t_f until every emulated PX4 is disarmed for good [s] (NaN: some never disarmed);
+- ``touchdown_speed_mps``: the fastest descent of any UAV within 5 cm above its touchdown height [m/s];
+- ``end_height_m``: the platform centre's height at the end [m]; ``hover_held``: at the end every PX4 is armed
+  in OFFBOARD, the platform within 8° of level and within 0.4 m of its height at t_f (the recovery case);
+- ``max_thrust_received``: the largest raw normalized thrust any PX4 received after t_f (1 = full throttle).
+
+``ros2 run fpr_experiments faults`` runs a matrix of cases (nodes × restart × seeds) and writes a Markdown table
+(``docs/safety.md``); tests/test_fault_response.py asserts the issue's acceptance on a few of them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FAULT_NODES", "FaultCase", "FaultResult", "fault_metrics", "run_fault"]
+
+#: the nodes of a UAV that can be killed: its controller, its PX4 bridge, its pose estimator
+FAULT_NODES = ("controller", "px4_bridge", "pose_estimator")
+SCENARIO = "hover"
+SCRIPT = "integration_hover"
+#: [s] simulated: the climb of the script ends at 5.1 s; the robot is settled at 8 s
+DEFAULT_FAULT_TIME = 8.0
+
+
+@dataclass(frozen=True)
+class FaultCase:
+    node: str = "controller"              #: one of FAULT_NODES
+    uav: int = 2                          #: the UAV whose node dies (1-based)
+    at: float = DEFAULT_FAULT_TIME        #: [s] simulation time of the kill
+    restart_after: float | None = None    #: [s] simulation time from the kill to the restart; None: stays dead
+    seed: int | None = None               #: scenario seed (None: the scenario's own)
+    after: float = 16.0                   #: [s] simulated after the kill
+    mode: str = "communicating"
+    realism: str = ""                     #: "" : the scenario's own (ideal)
+
+    def __post_init__(self) -> None:
+        if self.node not in FAULT_NODES:
+            raise ValueError(f"fault node '{self.node}' is not one of {', '.join(FAULT_NODES)}")
+        if self.restart_after is not None and not self.restart_after > 0.0:
+            raise ValueError(f"restart_after must be > 0 s, got {self.restart_after}")
+
+    @property
+    def label(self) -> str:
+        restart = f"restart {self.restart_after:g} s" if self.restart_after is not None else "no restart"
+        return f"uav{self.uav} {self.node} killed at {self.at:g} s, {restart}, seed {self.seed}"
+
+    @property
+    def group(self) -> str:
+        """The victim's own process group."""
+        return f"uav{self.uav}_{self.node}"
+
+
+@dataclass
+class FaultResult:
+    case: FaultCase
+    metrics: dict[str, float]
+    events: list[tuple[str, float, float]]
+    output_dir: str
+    completed: bool
+    errors: list[str] = field(default_factory=list)
+
+
+def fault_graph(case: FaultCase, scenario_file: str, px4_log_file: str,
+                parameters: Mapping[str, Mapping[str, Any]] | None = None) -> list:
+    """The node specs of ``case``'s flight (module doc), the victim in its own group."""
+    from fpr_experiments.graph import GraphOptions, describe_graph
+
+    options = GraphOptions(n=3, mode=case.mode, cameras="emulated", scenario=scenario_file, operator="joy_script",
+                           script=SCRIPT, realism=case.realism,
+                           parameters={k: dict(v) for k, v in (parameters or {}).items()})
+    options.parameters.setdefault("simulator", {}).update(
+        {"lockstep_on_timeout": "continue", "lockstep_timeout": 1.0, "px4_log_file": px4_log_file})
+    specs = describe_graph(options)
+    victims = [s for s in specs if s.executable == case.node and s.uav_id == case.uav]
+    if len(victims) != 1:
+        raise ValueError(f"no node {case.node} of uav {case.uav} in the graph")
+    victims[0].group = case.group
+    return specs
+
+
+#: the emergency-response combinations compared (README of fpr_px4_bridge, "Emergency response"): node parameter
+#: overrides per executable and scenario overrides (the emulated PX4s' failsafe, fpr_sim Px4Config)
+ALTERNATIVES: dict[str, dict[str, Any]] = {
+    "guard": {"description": "swarm guard (default): every UAV Hold on a fault, AUTO.LAND after 5 s unless it "
+                             "clears (rejoin); the lost UAV's PX4: COM_OF_LOSS_T 1 s, Hold COM_FAIL_ACT_T 5 s, Land",
+              "parameters": {"px4_bridge": {"swarm_guard": True}}, "scenario": {}},
+    "no_guard": {"description": "no swarm response (before issue 12): only the lost UAV's PX4 failsafe acts; the "
+                                "others fall back to NC (4.32) and fly on",
+                 "parameters": {"px4_bridge": {"swarm_guard": False}}, "scenario": {}},
+    "land_now": {"description": "swarm guard, AUTO.LAND at once (emergency_hold_time 0, COM_FAIL_ACT_T 0): no "
+                                "chance to rejoin",
+                 "parameters": {"px4_bridge": {"swarm_guard": True, "emergency_hold_time": 0.0}},
+                 "scenario": {"px4": {"failsafe_hold_time": 0.0}}},
+}
+
+
+def run_fault(case: FaultCase, output_dir: str, *, parameters: Mapping[str, Mapping[str, Any]] | None = None,
+              scenario_overrides: Mapping[str, Any] | None = None, real_time_factor: float = 0.5,
+              log: bool = True) -> FaultResult:
+    """Fly ``case`` in the multi-process graph; metrics, events and the flight's files in ``output_dir``."""
+    from fpr_sim.px4_log import read_px4_log
+    from fpr_sim.scenario import load_scenario
+
+    from fpr_experiments.processes import ProcessFault, run_processes
+    from fpr_experiments.recording import flight_record, recorded_topics, write_mcap
+    from fpr_experiments.runner import effective_scenario
+
+    os.makedirs(output_dir, exist_ok=True)
+    scenario_file = effective_scenario(SCENARIO, case.seed, os.path.join(output_dir, "scenario.yaml"),
+                                       case.realism or None, scenario_overrides)
+    scenario = load_scenario(scenario_file)
+    px4_log_file = os.path.join(output_dir, "px4_log.csv")
+    specs = fault_graph(case, scenario_file, px4_log_file, parameters)
+    events: list[tuple[str, float, float]] = []
+    duration = case.at + case.after
+    recording, completed, _timeouts, errors, _wall = run_processes(
+        specs, recorded_topics(3), duration, output_dir=output_dir, real_time_factor=real_time_factor,
+        label=case.label, log=log, faults=[ProcessFault(case.group, case.at, case.restart_after)],
+        fault_events=events)
+    record = flight_record(recording, 3, experiment="fault", variant=case.node, scenario=SCENARIO, script=SCRIPT,
+                           controller_mode=case.mode, cameras="emulated", sim_time=duration, wall_time=_wall,
+                           lockstep_timeouts=_timeouts, callback_errors=errors, completed=completed,
+                           camera_rate=scenario.cameras.rate,
+                           landing_gear_height=scenario.quadrotor.landing_gear_height)
+    write_mcap(recording, os.path.join(output_dir, "flight.mcap"), metadata={"fault": case.label})
+    killed = [e for e in events if e[0].startswith("killed")]
+    fault_time = killed[0][1] if killed else case.at
+    metrics = fault_metrics(record, read_px4_log(px4_log_file), fault_time,
+                            scenario.quadrotor.landing_gear_height)
+    return FaultResult(case, metrics, events, output_dir, completed, errors)
+
+
+def _tilt(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Angle between the body z axis and the world vertical [rad], for (N, 4) quaternions."""
+    w, x, y, z = quat_wxyz.T
+    cos_tilt = 1.0 - 2.0 * (x * x + y * y)
+    return np.arccos(np.clip(cos_tilt, -1.0, 1.0))
+
+
+def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float) -> dict[str, float]:
+    """The module doc's metrics of one flight (``record``: fpr_experiments FlightRecord; ``px4_log``:
+    fpr_sim.px4_log.Px4LogData)."""
+    truth = record.truth
+    after = truth.t >= fault_time
+    if after.sum() < 2:
+        raise ValueError(f"no ground truth after the fault at {fault_time:.2f} s")
+    t = truth.t[after]
+    uav_z = truth.uav_positions[after, :, 2]
+    metrics: dict[str, float] = {"fault_time_s": float(fault_time)}
+    metrics["max_tilt_deg"] = float(np.degrees(_tilt(truth.quat[after]).max()))
+    metrics["max_climb_m"] = float((uav_z - uav_z[0]).max())
+    uav_ids = range(1, record.n + 1)
+    disarms = [px4_log.disarm_time(i, fault_time) for i in uav_ids]
+    metrics["all_disarmed_s"] = (max(disarms) - fault_time) if all(math.isfinite(d) for d in disarms) else math.nan
+    speeds = []
+    for k in range(record.n):
+        z = uav_z[:, k]
+        vz = np.gradient(z, t)
+        ground = z.min()
+        near = z <= ground + 0.05
+        if ground <= landing_gear_height + 0.05 and near.any():
+            speeds.append(float(-vz[near].min()))
+    metrics["touchdown_speed_mps"] = max(speeds) if speeds else math.nan
+    metrics["end_height_m"] = float(truth.position[-1, 2])
+    end_tilt = float(np.degrees(_tilt(truth.quat[-1:]))[0])
+    offboard_at_end = all(px4_log.armed_at(i, t[-1]) and px4_log.modes.get(i, ["?"])[-1].startswith("OFFBOARD")
+                          for i in uav_ids)
+    metrics["hover_held"] = float(offboard_at_end and end_tilt < 8.0
+                                  and abs(truth.position[-1, 2] - truth.position[after][0, 2]) < 0.4)
+    received = [px4_log.setpoint_thrust[i][px4_log.setpoint_t[i] >= fault_time] for i in uav_ids
+                if i in px4_log.setpoint_t]
+    metrics["max_thrust_received"] = float(max((r.max() for r in received if len(r)), default=math.nan))
+    return metrics
+
+
+def format_table(results: Sequence[FaultResult]) -> str:
+    """Markdown table of fault results (one row per case)."""
+    columns = [("max_tilt_deg", "max tilt [°]", "{:.1f}"), ("max_climb_m", "max climb [m]", "{:.2f}"),
+               ("all_disarmed_s", "all disarmed [s]", "{:.1f}"), ("touchdown_speed_mps", "touchdown [m/s]", "{:.2f}"),
+               ("end_height_m", "end height [m]", "{:.2f}"), ("hover_held", "hover held", "{:.0f}"),
+               ("max_thrust_received", "max thrust [0-1]", "{:.2f}")]
+    lines = ["| node | restart | seed | " + " | ".join(c[1] for c in columns) + " |",
+             "|---|---|---|" + "---|" * len(columns)]
+    for result in results:
+        case = result.case
+        cells = [("—" if not math.isfinite(result.metrics.get(key, math.nan)) else fmt.format(result.metrics[key]))
+                 for key, _, fmt in columns]
+        restart = f"{case.restart_after:g} s" if case.restart_after is not None else "none"
+        lines.append(f"| {case.node} | {restart} | {case.seed} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _parse_parameter(text: str) -> tuple[str, str, Any]:
+    """``executable.name=value`` (value parsed as YAML) -> (executable, name, value)."""
+    import yaml
+
+    target, sep, value = text.partition("=")
+    executable, dot, name = target.partition(".")
+    if not (sep and dot and executable and name):
+        raise ValueError(f"--parameter expects executable.name=value, got {text!r}")
+    return executable, name, yaml.safe_load(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``ros2 run fpr_experiments faults``: the fault matrix (module doc) -> a Markdown report."""
+    import argparse
+    import sys
+    import time
+
+    parser = argparse.ArgumentParser(prog="ros2 run fpr_experiments faults", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--nodes", nargs="+", default=list(FAULT_NODES), choices=FAULT_NODES)
+    parser.add_argument("--restart", nargs="+", default=["none", "2"],
+                        help="restart delays [s of simulation time after the kill]; 'none': stays dead")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    parser.add_argument("--uav", type=int, default=2)
+    parser.add_argument("--alternatives", nargs="+", default=["guard"], choices=sorted(ALTERNATIVES))
+    parser.add_argument("--parameter", action="append", default=[], metavar="EXECUTABLE.NAME=VALUE",
+                        help="extra node parameter for every case, e.g. px4_bridge.emergency_hold_time=3")
+    parser.add_argument("--output-dir", default=os.path.join("reports", "faults"))
+    parser.add_argument("--results", default="", help="write the Markdown report here (e.g. docs/safety.md)")
+    parser.add_argument("--real-time-factor", type=float, default=0.5)
+    args = parser.parse_args(argv)
+    try:
+        extra: dict[str, dict[str, Any]] = {}
+        for text in args.parameter:
+            executable, name, value = _parse_parameter(text)
+            extra.setdefault(executable, {})[name] = value
+        restarts = [None if r == "none" else float(r) for r in args.restart]
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    start = time.monotonic()
+    sections = []
+    for alternative in args.alternatives:
+        spec = ALTERNATIVES[alternative]
+        parameters = {k: dict(v) for k, v in spec["parameters"].items()}
+        for executable, values in extra.items():
+            parameters.setdefault(executable, {}).update(values)
+        results = []
+        for node in args.nodes:
+            for restart in restarts:
+                for seed in args.seeds:
+                    case = FaultCase(node=node, uav=args.uav, restart_after=restart, seed=seed)
+                    folder = os.path.join(args.output_dir, alternative,
+                                          f"{node}_{'dead' if restart is None else f'restart{restart:g}'}_s{seed}")
+                    try:
+                        result = run_fault(case, folder, parameters=parameters, scenario_overrides=spec["scenario"],
+                                           real_time_factor=args.real_time_factor)
+                    except (RuntimeError, ValueError, TimeoutError) as error:
+                        print(f"[faults] {case.label}: {error}", flush=True)
+                        continue
+                    results.append(result)
+                    m = result.metrics
+                    print(f"[faults] {alternative}: {case.label}: tilt {m['max_tilt_deg']:.1f} deg, climb "
+                          f"{m['max_climb_m']:.2f} m, disarmed after {m['all_disarmed_s']:.1f} s, touchdown "
+                          f"{m['touchdown_speed_mps']:.2f} m/s, hover held {m['hover_held']:.0f} "
+                          f"({time.monotonic() - start:.0f} s)", flush=True)
+        sections.append((alternative, spec["description"], results))
+    report = _report(sections, " ".join(["ros2 run fpr_experiments faults", *(argv if argv is not None
+                                                                             else sys.argv[1:])]))
+    if args.results:
+        with open(args.results, "w", encoding="utf-8") as stream:
+            stream.write(report)
+        print(f"wrote {args.results} ({time.monotonic() - start:.0f} s)")
+    else:
+        print(report)
+    return 0
+
+
+def _report(sections, command: str) -> str:
+    lines = ["# Fault injection: one node of one UAV killed mid-hover (issue 12)", "",
+             f"Generated by `{command}` (wrapper: `bash scripts/run_faults.sh`); do not edit by hand.", "",
+             __doc__.split("\n\n", 1)[1].split("``ros2 run")[0].strip(), "",
+             "Acceptance (issue 12): platform tilt < 30°, no UAV climbs > 0.5 m above its height at the fault, "
+             "every PX4 disarmed within 15 s touching down at < 1 m/s; restarted within 2 s: hover held.", ""]
+    for alternative, description, results in sections:
+        lines += [f"## {alternative}", "", description, "", format_table(results), ""]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

@@ -1,0 +1,233 @@
+"""Swarm guard and the EMERGENCY state (issue 12), explicit time, no I/O."""
+
+import math
+
+import pytest
+from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, OffboardStateMachine, TeleopMode
+from fpr_px4_bridge.swarm_guard import Cause, SwarmGuard, SwarmGuardConfig, Verdict
+
+from fpr_px4_bridge import px4_protocol as p
+
+ARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | p.MAV_MODE_FLAG_SAFETY_ARMED
+DISARMED = p.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+OFFBOARD = p.encode_custom_mode(p.Px4MainMode.OFFBOARD)
+HOLD = p.encode_custom_mode(p.Px4MainMode.AUTO, p.Px4AutoSubMode.LOITER)
+LAND = p.encode_custom_mode(p.Px4MainMode.AUTO, p.Px4AutoSubMode.LAND)
+NONE = Verdict(Cause.NONE)
+PEER = Verdict(Cause.PEER, "uav2 in an emergency: own controller's setpoints stale")
+OWN = Verdict(Cause.SETPOINTS, "own controller's setpoints stale")
+
+
+def healthy_guard(now: float = 0.0) -> SwarmGuard:
+    guard = SwarmGuard(SwarmGuardConfig(uav_id=1))
+    for j in (2, 3):
+        guard.on_peer_status(j, 4, False, "", now)
+        guard.on_info(j, now)
+    guard.on_own_controller_status(True, now)
+    return guard
+
+
+def own_controller_fine(guard: SwarmGuard, t: float) -> None:
+    guard.on_own_controller_status(True, t)
+
+
+def test_guard_is_quiet_while_everything_is_fresh_and_off_the_ground():
+    guard = healthy_guard()
+    assert guard.evaluate(0.1, setpoints_fresh=True, flying=True) == NONE
+    # on the ground / before FLY nothing is judged, however stale
+    assert guard.evaluate(100.0, setpoints_fresh=False, flying=False) == NONE
+    assert not SwarmGuard(SwarmGuardConfig(enabled=False)).evaluate(0.0, False, True).emergency
+
+
+def test_own_causes_setpoints_then_estimate():
+    guard = healthy_guard()
+    verdict = guard.evaluate(0.1, setpoints_fresh=False, flying=True)
+    assert verdict.cause is Cause.SETPOINTS and verdict.own and "controller" in verdict.reason
+    guard.on_own_controller_status(False, 0.2)  # the estimator died: no valid local state since 0.0
+    assert guard.evaluate(0.25, True, True) == NONE  # within estimate_deadline (0.3 s)
+    verdict = guard.evaluate(0.31, True, True)
+    assert verdict.cause is Cause.ESTIMATE and verdict.own and "estimator" in verdict.reason
+    guard.on_own_controller_status(True, 0.4)
+    assert guard.evaluate(0.41, True, True) == NONE
+
+
+def test_a_peer_own_emergency_is_followed_but_a_peer_following_is_not_echoed():
+    guard = healthy_guard()
+    guard.on_peer_status(2, 8, True, "own controller's setpoints stale", 0.1)
+    verdict = guard.evaluate(0.15, True, True)
+    assert verdict.cause is Cause.PEER and not verdict.own and "uav2" in verdict.reason
+    guard.on_peer_status(2, 8, False, "following uav3", 0.2)  # uav2 only follows: no echo back
+    assert guard.evaluate(0.25, True, True) == NONE
+
+
+@pytest.mark.parametrize("state, word", [(0, "DISCONNECTED"), (6, "KILLED"), (7, "FAILSAFE")])
+def test_a_peer_bridge_reporting_a_lost_state_is_followed(state, word):
+    guard = healthy_guard()
+    guard.on_peer_status(3, state, False, "", 0.1)
+    verdict = guard.evaluate(0.15, True, True)
+    assert verdict.cause is Cause.PEER and "uav3" in verdict.reason and word in verdict.reason
+
+
+def test_a_dead_peer_bridge_is_its_status_stale_while_its_zeta_arrives():
+    guard = healthy_guard()
+    for k in range(1, 16):  # uav2's controller keeps publishing zeta, its bridge's status stopped at 0.0
+        t = 0.1 * k
+        guard.on_info(2, t)
+        guard.on_info(3, t)
+        guard.on_peer_status(3, 4, False, "", t)
+        own_controller_fine(guard, t)
+        verdict = guard.evaluate(t, True, True)
+        if t <= 1.0 + 1e-9:
+            assert verdict == NONE, t
+    assert verdict.cause is Cause.PEER and "uav2's bridge silent" in verdict.reason
+
+
+def test_a_link_outage_shorter_than_the_silence_deadline_is_left_to_the_nc_fallback():
+    """comm_loss: every zeta dropped for 3 s (statuses fresh) must not start an emergency; a peer silent on both
+    for longer than peer_silence_deadline (5 s) does."""
+    guard = healthy_guard()
+    for k in range(1, 31):  # zeta gone for 3 s, statuses fresh
+        t = 0.1 * k
+        for j in (2, 3):
+            guard.on_peer_status(j, 4, False, "", t)
+        own_controller_fine(guard, t)
+        assert guard.evaluate(t, True, True) == NONE, t
+    verdicts = []
+    for k in range(1, 60):  # now both silent
+        own_controller_fine(guard, 3.0 + 0.1 * k)
+        verdicts.append(guard.evaluate(3.0 + 0.1 * k, True, True))
+    first = next(k for k, v in enumerate(verdicts, 1) if v.emergency)
+    assert 3.0 + 0.1 * first == pytest.approx(3.0 + 5.0 + 0.1, abs=0.11)  # 5 s after the last status (3.0)
+    assert "silent for" in verdicts[first - 1].reason
+
+
+def test_a_peer_never_heard_from_is_not_part_of_the_swarm():
+    guard = SwarmGuard(SwarmGuardConfig(uav_id=1))
+    assert guard.evaluate(60.0, True, True) == NONE
+
+
+def test_envelope_climb_rate_tilt_and_height_latch_until_disarmed():
+    cfg = SwarmGuardConfig(uav_id=1)
+    guard = SwarmGuard(SwarmGuardConfig(uav_id=1))  # no peers, no own controller status: envelope alone
+    guard.on_local_position(0.0, 0.0, 0.0, armed=False, landed=True, now=0.0)  # take-off point: height 0
+    guard.on_local_position(1.0, 2.5, 5.0, armed=True, landed=False, now=1.0)  # climbing 2.5 m/s
+    assert guard.evaluate(1.0 + cfg.envelope_time - 0.01, True, True) == NONE  # not for envelope_time yet
+    guard.on_local_position(1.7, 2.5, 5.0, armed=True, landed=False, now=1.0 + cfg.envelope_time)
+    verdict = guard.evaluate(1.0 + cfg.envelope_time, True, True)
+    assert verdict.cause is Cause.ENVELOPE and verdict.latched and "climbing" in verdict.reason
+    guard.on_local_position(1.7, 0.0, 5.0, armed=True, landed=False, now=2.0)  # climb over: still latched
+    assert guard.evaluate(2.0, True, True) is verdict
+    guard.reset_latch()
+    assert guard.evaluate(2.1, True, True) == NONE
+    guard.on_local_position(2.0, 0.0, 70.0, armed=True, landed=False, now=3.0)  # attitude failure
+    guard.on_local_position(2.0, 0.0, 70.0, armed=True, landed=False, now=3.35)
+    assert "tilt" in guard.evaluate(3.35, True, True).reason
+    guard.reset_latch()
+    guard.on_local_position(12.0, 0.0, 0.0, armed=True, landed=False, now=4.0)  # above max_height (10 m)
+    assert "height" in guard.evaluate(4.0, True, True).reason
+    guard.on_local_position(math.nan, 0.0, 0.0, armed=True, landed=False, now=5.0)  # NaN: ignored, no crash
+
+
+def test_guard_config_refuses_nonsense():
+    with pytest.raises(ValueError, match="peer_status_deadline"):
+        SwarmGuardConfig(peer_status_deadline=-1.0)
+    with pytest.raises(ValueError, match="max_tilt_deg"):
+        SwarmGuardConfig(max_tilt_deg=0.0)
+
+
+# ---- the EMERGENCY state -----------------------------------------------------------------------------------
+def flying_machine(hold_time: float = 5.0) -> OffboardStateMachine:
+    """A state machine in OFFBOARD (operator FLY), PX4 armed in OFFBOARD, at t = 0."""
+    m = OffboardStateMachine(OffboardConfig(emergency_hold_time=hold_time, rejoin_delay=0.5))
+    m.on_heartbeat(ARMED, OFFBOARD, 0.0)
+    m.on_teleop(TeleopMode.FLY, 0.0)
+    m.step(0.0, True, NONE)
+    m.step(0.02, True, NONE)
+    assert m.state == BridgeState.OFFBOARD
+    return m
+
+
+def labels(decision):
+    return [c.label for c in decision.commands]
+
+
+def test_emergency_holds_then_lands_when_the_cause_persists():
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    d = m.step(1.0, False, OWN)
+    assert m.state == BridgeState.EMERGENCY and labels(d) == ["AUTO.LOITER"]  # Hold at once, same tick
+    assert any(e.level == "error" and "swarm emergency (own fault)" in e.text for e in d.events)
+    assert not d.stream  # the controller's setpoints are stale: nothing to stream
+    commands = []
+    t = 1.1
+    while t < 6.2:
+        m.on_heartbeat(ARMED, LAND if any(c == "AUTO.LAND" for _, c in commands) else HOLD, t)
+        commands += [(t, c) for c in labels(m.step(t, False, OWN))]
+        t = round(t + 0.02, 9)
+    land = [t for t, c in commands if c == "AUTO.LAND"]
+    assert land and land[0] == pytest.approx(6.0, abs=0.021)  # emergency_hold_time after the entry
+    assert "AUTO.LOITER" not in [c for _, c in commands]  # PX4 in Hold: not asked again
+    m.on_heartbeat(DISARMED, LAND, 9.0)
+    m.step(9.0, False, OWN)
+    assert m.state == BridgeState.IDLE and m.emergency is None
+
+
+def test_emergency_rejoins_once_the_cause_stays_clear():
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    assert m.state == BridgeState.EMERGENCY and m.emergency == PEER and not m.emergency.own
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    d = m.step(1.1, True, PEER)
+    assert d.stream  # the healthy controller's stream goes on (PX4 ignores it in Hold; OFFBOARD resumes at once)
+    for t in (1.5, 2.0):
+        m.on_heartbeat(ARMED, HOLD, t)
+        m.step(t, True, PEER if t < 2.0 else NONE)  # clear from 2.0
+    m.on_heartbeat(ARMED, HOLD, 2.4)
+    m.step(2.4, True, NONE)
+    assert m.state == BridgeState.EMERGENCY  # not yet rejoin_delay
+    d = m.step(2.52, True, NONE)
+    assert m.state == BridgeState.WARMUP and any("rejoining" in e.text for e in d.events)
+    d = m.step(2.54, True, NONE)
+    assert "OFFBOARD" in labels(d)  # the stream has run > offboard_warmup: OFFBOARD requested at once
+    m.on_heartbeat(ARMED, OFFBOARD, 2.6)
+    m.step(2.62, True, NONE)
+    assert m.state == BridgeState.OFFBOARD
+
+
+def test_a_new_fault_during_the_rejoin_returns_to_the_emergency():
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    m.step(2.0, True, NONE)
+    m.step(2.6, True, NONE)
+    assert m.state == BridgeState.WARMUP
+    m.step(2.62, True, PEER)
+    assert m.state == BridgeState.EMERGENCY
+
+
+def test_px4_leaving_offboard_on_its_own_is_an_own_emergency_and_px4_landing_is_followed():
+    m = flying_machine()
+    m.on_heartbeat(ARMED, LAND, 1.0)  # PX4's own failsafe
+    d = m.step(1.0, True, NONE)
+    assert m.state == BridgeState.EMERGENCY and m.emergency.own and m.emergency.cause is Cause.PX4
+    assert any("landing with it" in e.text for e in d.events)
+    d = m.step(1.02, True, NONE)
+    assert "AUTO.LOITER" not in labels(d)  # PX4 lands on its own: landing with it, no rejoin
+    m.step(3.0, True, NONE)
+    assert m.state == BridgeState.EMERGENCY
+
+
+def test_the_operator_overrides_the_emergency_but_fly_or_arm_does_not_abort_it():
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    m.on_teleop(TeleopMode.ARM, 1.1)
+    m.on_teleop(TeleopMode.FLY, 1.2)
+    assert m.state == BridgeState.EMERGENCY
+    m.on_teleop(TeleopMode.LAND, 1.3)
+    assert m.state == BridgeState.LANDING and m.emergency is None
+
+
+def test_without_a_guard_the_former_failsafe_stays():
+    m = flying_machine()
+    m.step(1.0, False)  # no verdict: no guard
+    assert m.state == BridgeState.FAILSAFE
