@@ -90,7 +90,7 @@ def fault_graph(case: FaultCase, scenario_file: str, px4_log_file: str,
                            script=SCRIPT, realism=case.realism,
                            parameters={k: dict(v) for k, v in (parameters or {}).items()})
     options.parameters.setdefault("simulator", {}).update(
-        {"lockstep_on_timeout": "continue", "lockstep_timeout": 1.0, "px4_log_file": px4_log_file})
+        {"lockstep_on_timeout": "continue", "lockstep_timeout": 0.3, "px4_log_file": px4_log_file})
     specs = describe_graph(options)
     victims = [s for s in specs if s.executable == case.node and s.uav_id == case.uav]
     if len(victims) != 1:
