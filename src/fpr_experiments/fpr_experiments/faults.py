@@ -151,16 +151,11 @@ def run_fault(case: FaultCase, output_dir: str, *, parameters: Mapping[str, Mapp
     return FaultResult(case, metrics, events, output_dir, completed, errors)
 
 
-def _tilt(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Angle between the body z axis and the world vertical [rad], for (N, 4) quaternions."""
-    w, x, y, z = quat_wxyz.T
-    cos_tilt = 1.0 - 2.0 * (x * x + y * y)
-    return np.arccos(np.clip(cos_tilt, -1.0, 1.0))
-
-
 def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float) -> dict[str, float]:
     """The module doc's metrics of one flight (``record``: fpr_experiments FlightRecord; ``px4_log``:
     fpr_sim.px4_log.Px4LogData)."""
+    from fpr_model.rotations import quat_tilt
+
     truth = record.truth
     after = truth.t >= fault_time
     if after.sum() < 2:
@@ -168,7 +163,7 @@ def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float
     t = truth.t[after]
     uav_z = truth.uav_positions[after, :, 2]
     metrics: dict[str, float] = {"fault_time_s": float(fault_time)}
-    metrics["max_tilt_deg"] = float(np.degrees(_tilt(truth.quat[after]).max()))
+    metrics["max_tilt_deg"] = float(np.degrees(quat_tilt(truth.quat[after]).max()))
     metrics["max_climb_m"] = float((uav_z - uav_z[0]).max())
     uav_ids = range(1, record.n + 1)
     disarms = [px4_log.disarm_time(i, fault_time) for i in uav_ids]
@@ -183,7 +178,7 @@ def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float
             speeds.append(float(-vz[near].min()))
     metrics["touchdown_speed_mps"] = max(speeds) if speeds else math.nan
     metrics["end_height_m"] = float(truth.position[-1, 2])
-    end_tilt = float(np.degrees(_tilt(truth.quat[-1:]))[0])
+    end_tilt = math.degrees(quat_tilt(truth.quat[-1]))
     offboard_at_end = all(px4_log.armed_at(i, t[-1]) and px4_log.modes.get(i, ["?"])[-1].startswith("OFFBOARD")
                           for i in uav_ids)
     metrics["hover_held"] = float(offboard_at_end and end_tilt < 8.0

@@ -206,6 +206,15 @@ def _quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     return out
 
 
+def quat_tilt(q) -> np.ndarray | float:
+    """Tilt [rad]: the angle between the body z axis of ``q`` ([w, x, y, z], body -> world, or (N, 4)) and the
+    world z axis, from R_33 = 1 - 2(x² + y²)."""
+    q = np.asarray(q, dtype=float)
+    cos_tilt = 1.0 - 2.0 * (q[..., 1] ** 2 + q[..., 2] ** 2)
+    tilt = np.arccos(np.clip(cos_tilt, -1.0, 1.0))
+    return float(tilt) if tilt.ndim == 0 else tilt
+
+
 def quat_to_rotmat(q) -> np.ndarray:
     """Rotation matrix of a unit quaternion (A.60), body -> world. ``q`` (..., 4) -> (..., 3, 3).
 

@@ -256,3 +256,14 @@ def test_inverse_pose_composes_to_identity():
     # child in parent, then parent in child: identity
     assert np.allclose(quat_rotate(quat, inv_position) + position, 0.0, atol=1e-12)
     assert np.allclose(np.abs(quat_multiply(quat, inv_quat)), [1.0, 0.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_quat_tilt_is_the_angle_of_body_z_from_the_vertical_scalar_and_batched():
+    import math
+
+    from fpr_model.rotations import euler_zyx_to_quat, quat_tilt
+
+    assert quat_tilt([1.0, 0.0, 0.0, 0.0]) == 0.0
+    assert math.isclose(quat_tilt(euler_zyx_to_quat(0.3, 0.0, 1.2)), 0.3, abs_tol=1e-12)  # yaw does not tilt
+    batch = np.array([euler_zyx_to_quat(0.0, 0.5, 0.0), euler_zyx_to_quat(math.pi, 0.0, 0.0)])
+    np.testing.assert_allclose(quat_tilt(batch), [0.5, math.pi], atol=1e-7)

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from fpr_model.battery import max_thrust, normalized_thrust
+from fpr_model.rotations import quat_tilt
 
 from fpr_px4_bridge.link import MavlinkLink
 from fpr_px4_bridge.offboard import BridgeState, LogEvent, OffboardConfig, OffboardStateMachine
@@ -387,8 +388,7 @@ class Px4Bridge:
         attitude = self.telemetry.attitude
         if position is None or attitude is None or now - position.stamp > 0.5:
             return
-        w, x, y, z = attitude
-        tilt = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+        tilt = math.degrees(quat_tilt(attitude))
         self.guard.on_local_position(position.height, position.climb_rate, tilt, self.machine.armed,
                                      not self.machine.armed, now)
 
