@@ -20,6 +20,7 @@ setup(
         ('share/' + package_name + '/config/thesis', glob('config/thesis/*.yaml')),
         ('share/' + package_name + '/config/calibration', glob('config/calibration/*.yaml')),
         ('share/' + package_name + '/config/viz', glob('config/viz/*')),
+        ('share/' + package_name + '/config/sros2', glob('config/sros2/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -37,6 +38,7 @@ setup(
             'info_link = fpr_experiments.info_link_node:main',
             'calibrate = fpr_experiments.calibration:main',
             'faults = fpr_experiments.faults:main',
+            'security_policy = fpr_experiments.security:main',
         ],
     },
 )

@@ -5,9 +5,10 @@ of the emulated PX4s (the simulator's ``px4_log_file``, :mod:`fpr_sim.px4_log`).
 The flight: the ``hover`` scenario (armed in OFFBOARD at 1.5 m, legs 45°), the ``integration_hover`` joy script
 (ARM + FLY, climb 2 s at 0.3 m/s to ~2.1 m, hold), mode C, emulated cameras, the graph as on the robot (one
 process per UAV, ground, simulator) except that the victim node runs in a process of its own, so that it can
-die alone (SIGKILL: no clean shutdown, as a crash). Lockstep with ``lockstep_on_timeout: continue`` and a 1 s
-watchdog: a dead stream is waited for once, then the simulation flies on without it (PX4's failsafes play out
-in simulation time).
+die alone (SIGKILL: no clean shutdown, as a crash). Lockstep with ``lockstep_on_timeout: continue`` and a 0.3 s
+watchdog (below the bridges' 0.8 s ``wall_silence_timeout``, so that the wait for a dead stream does not look
+like a dead simulator to the others): a dead stream is waited for once, then the simulation flies on without it
+(PX4's failsafes play out in simulation time).
 
 Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simulation time):
 
@@ -19,6 +20,10 @@ Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simu
   in OFFBOARD, the platform within 8° of level and within 0.4 m of its height at t_f (the recovery case);
 - ``max_thrust_received``: the largest raw normalized thrust any PX4 received after t_f (1 = full throttle).
 
+Killing the ``simulator`` (every emulated PX4 with it) measures instead how fast each bridge says so:
+``link_lost_s`` the largest, over the UAVs, wall time from the kill to the bridge's "PX4 lost" line
+(:func:`link_loss_delays`; the bridges' wall-clock watchdog, since /clock stops with the simulator).
+
 ``ros2 run fpr_experiments faults`` runs a matrix of cases (nodes × restart × seeds) and writes a Markdown table
 (``docs/safety.md``); tests/test_fault_response.py asserts the issue's acceptance on a few of them.
 """
@@ -27,16 +32,20 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["FAULT_NODES", "FaultCase", "FaultResult", "fault_metrics", "run_fault"]
+__all__ = ["FAULT_NODES", "FAULT_TARGETS", "FaultCase", "FaultResult", "fault_metrics", "link_loss_delays",
+           "run_fault"]
 
 #: the nodes of a UAV that can be killed: its controller, its PX4 bridge, its pose estimator
 FAULT_NODES = ("controller", "px4_bridge", "pose_estimator")
+#: ... and the simulator (all PX4s at once; no restart)
+FAULT_TARGETS = (*FAULT_NODES, "simulator")
 SCENARIO = "hover"
 SCRIPT = "integration_hover"
 #: [s] simulated: the climb of the script ends at 5.1 s; the robot is settled at 8 s
@@ -55,20 +64,24 @@ class FaultCase:
     realism: str = ""                     #: "" : the scenario's own (ideal)
 
     def __post_init__(self) -> None:
-        if self.node not in FAULT_NODES:
-            raise ValueError(f"fault node '{self.node}' is not one of {', '.join(FAULT_NODES)}")
+        if self.node not in FAULT_TARGETS:
+            raise ValueError(f"fault node '{self.node}' is not one of {', '.join(FAULT_TARGETS)}")
+        if self.node == "simulator" and self.restart_after is not None:
+            raise ValueError("the simulator cannot be restarted")
         if self.restart_after is not None and not self.restart_after > 0.0:
             raise ValueError(f"restart_after must be > 0 s, got {self.restart_after}")
 
     @property
     def label(self) -> str:
         restart = f"restart {self.restart_after:g} s" if self.restart_after is not None else "no restart"
+        if self.node == "simulator":
+            return f"simulator killed at {self.at:g} s, seed {self.seed}"
         return f"uav{self.uav} {self.node} killed at {self.at:g} s, {restart}, seed {self.seed}"
 
     @property
     def group(self) -> str:
         """The victim's own process group."""
-        return f"uav{self.uav}_{self.node}"
+        return "simulator" if self.node == "simulator" else f"uav{self.uav}_{self.node}"
 
 
 @dataclass
@@ -92,6 +105,8 @@ def fault_graph(case: FaultCase, scenario_file: str, px4_log_file: str,
     options.parameters.setdefault("simulator", {}).update(
         {"lockstep_on_timeout": "continue", "lockstep_timeout": 0.3, "px4_log_file": px4_log_file})
     specs = describe_graph(options)
+    if case.node == "simulator":
+        return specs
     victims = [s for s in specs if s.executable == case.node and s.uav_id == case.uav]
     if len(victims) != 1:
         raise ValueError(f"no node {case.node} of uav {case.uav} in the graph")
@@ -146,9 +161,37 @@ def run_fault(case: FaultCase, output_dir: str, *, parameters: Mapping[str, Mapp
     write_mcap(recording, os.path.join(output_dir, "flight.mcap"), metadata={"fault": case.label})
     killed = [e for e in events if e[0].startswith("killed")]
     fault_time = killed[0][1] if killed else case.at
+    if case.node == "simulator":
+        if not killed:
+            raise RuntimeError(f"{case.label}: the simulator ended before the kill")
+        delays = link_loss_delays(os.path.join(output_dir, "logs"), killed[0][2], 3)
+        metrics = {"fault_time_s": float(fault_time), **{f"link_lost_uav{i}_s": d for i, d in delays.items()},
+                   "link_lost_s": max(delays.values())}
+        return FaultResult(case, metrics, events, output_dir, completed, errors)
     metrics = fault_metrics(record, read_px4_log(px4_log_file), fault_time,
                             scenario.quadrotor.landing_gear_height)
     return FaultResult(case, metrics, events, output_dir, completed, errors)
+
+
+#: a bridge's wall-watchdog line: ``[WARN] [<epoch s>] [<logger>…px4_bridge]: PX4 lost: …`` (rcutils' default
+#: console format; its stamp is the system clock, whatever the node's ROS clock)
+_LINK_LOST = re.compile(r"^\[WARN\] \[(\d+\.\d+)\] \[[^\]]*uav(\d+)\.px4_bridge\]: PX4 lost")
+
+
+def link_loss_delays(log_dir: str, kill_wall: float, n: int) -> dict[int, float]:
+    """Per UAV: wall seconds from ``kill_wall`` (epoch, ``time.time()``) to its bridge's first "PX4 lost" line
+    at or after it in the processes' logs (``log_dir``/*.log); inf where none came."""
+    delays = {i: math.inf for i in range(1, n + 1)}
+    for name in sorted(os.listdir(log_dir)):
+        if not name.endswith(".log"):
+            continue
+        with open(os.path.join(log_dir, name), encoding="utf-8", errors="replace") as stream:
+            for line in stream:
+                match = _LINK_LOST.match(line)
+                if match and float(match.group(1)) >= kill_wall and int(match.group(2)) in delays:
+                    uav = int(match.group(2))
+                    delays[uav] = min(delays[uav], float(match.group(1)) - kill_wall)
+    return delays
 
 
 def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float) -> dict[str, float]:
@@ -190,7 +233,21 @@ def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float
 
 
 def format_table(results: Sequence[FaultResult]) -> str:
-    """Markdown table of fault results (one row per case)."""
+    """Markdown tables of fault results (one row per case; simulator kills in a table of their own)."""
+    killed_simulator = [r for r in results if r.case.node == "simulator"]
+    results = [r for r in results if r.case.node != "simulator"]
+    simulator_table = ""
+    if killed_simulator:
+        rows = ["| simulator killed at [s] | seed | " + " | ".join(f"uav{i} says PX4 lost after [s wall]"
+                                                                   for i in range(1, 4)) + " |",
+                "|---|---|---|---|---|"]
+        for result in killed_simulator:
+            m = result.metrics
+            rows.append(f"| {m['fault_time_s']:.2f} | {result.case.seed} | "
+                        + " | ".join(f"{m.get(f'link_lost_uav{i}_s', math.inf):.2f}" for i in range(1, 4)) + " |")
+        simulator_table = "\n".join(rows)
+        if not results:
+            return simulator_table
     columns = [("max_tilt_deg", "max tilt [°]", "{:.1f}"), ("max_climb_m", "max climb [m]", "{:.2f}"),
                ("all_disarmed_s", "all disarmed [s]", "{:.1f}"), ("touchdown_speed_mps", "touchdown [m/s]", "{:.2f}"),
                ("end_height_m", "end height [m]", "{:.2f}"), ("hover_held", "hover held", "{:.0f}"),
@@ -203,7 +260,7 @@ def format_table(results: Sequence[FaultResult]) -> str:
                  for key, _, fmt in columns]
         restart = f"{case.restart_after:g} s" if case.restart_after is not None else "none"
         lines.append(f"| {case.node} | {restart} | {case.seed} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines) + ("\n\n" + simulator_table if simulator_table else "")
 
 
 def _parse_parameter(text: str) -> tuple[str, str, Any]:
@@ -224,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     import time
 
     parser = argparse.ArgumentParser(prog="ros2 run fpr_experiments faults", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--nodes", nargs="+", default=list(FAULT_NODES), choices=FAULT_NODES)
+    parser.add_argument("--nodes", nargs="+", default=list(FAULT_TARGETS), choices=FAULT_TARGETS,
+                        help="what to kill (default: each UAV node, then the simulator)")
     parser.add_argument("--restart", nargs="+", default=["none", "2"],
                         help="restart delays [s of simulation time after the kill]; 'none': stays dead")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
@@ -254,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
             parameters.setdefault(executable, {}).update(values)
         results = []
         for node in args.nodes:
-            for restart in restarts:
+            for restart in ([None] if node == "simulator" else restarts):
                 for seed in args.seeds:
                     case = FaultCase(node=node, uav=args.uav, restart_after=restart, seed=seed)
                     folder = os.path.join(args.output_dir, alternative,
@@ -267,6 +325,10 @@ def main(argv: list[str] | None = None) -> int:
                         continue
                     results.append(result)
                     m = result.metrics
+                    if node == "simulator":
+                        print(f"[faults] {alternative}: {case.label}: every bridge said 'PX4 lost' within "
+                              f"{m['link_lost_s']:.2f} s wall ({time.monotonic() - start:.0f} s)", flush=True)
+                        continue
                     print(f"[faults] {alternative}: {case.label}: tilt {m['max_tilt_deg']:.1f} deg, climb "
                           f"{m['max_climb_m']:.2f} m, disarmed after {m['all_disarmed_s']:.1f} s, touchdown "
                           f"{m['touchdown_speed_mps']:.2f} m/s, hover held {m['hover_held']:.0f} "
@@ -288,7 +350,8 @@ def _report(sections, command: str) -> str:
              f"Generated by `{command}` (wrapper: `bash scripts/run_faults.sh`); do not edit by hand.", "",
              __doc__.split("\n\n", 1)[1].split("``ros2 run")[0].strip(), "",
              "Acceptance (issue 12): platform tilt < 30°, no UAV climbs > 0.5 m above its height at the fault, "
-             "every PX4 disarmed within 15 s touching down at < 1 m/s; restarted within 2 s: hover held.", ""]
+             "every PX4 disarmed within 15 s touching down at < 1 m/s; restarted within 2 s: hover held; simulator "
+             "killed: every bridge says the link is lost within 1 s of wall time.", ""]
     for alternative, description, results in sections:
         lines += [f"## {alternative}", "", description, "", format_table(results), ""]
     return "\n".join(lines) + "\n"

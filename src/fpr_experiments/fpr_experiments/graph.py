@@ -96,9 +96,11 @@ class NodeSpec:
             args += ["-r", f"{source}:={target}"]
         return args
 
-    def command(self) -> list[str]:
-        """``ros2 run`` command line of this node alone."""
-        return ["ros2", "run", self.package, self.executable, *self.ros_args()]
+    def command(self, enclave: bool = False) -> list[str]:
+        """``ros2 run`` command line of this node alone; ``enclave``: in its SROS2 enclave (its fully qualified
+        name, the enclaves of fpr_experiments.security's policy)."""
+        return ["ros2", "run", self.package, self.executable, *self.ros_args(),
+                *(["--enclave", self.fully_qualified_name] if enclave else [])]
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -268,7 +270,18 @@ LAUNCH_ARGUMENTS: dict[str, tuple[str, str]] = {
                     "scenario's own, default ideal)"),
     "signing_key_file": ("", "MAVLink 2 signing key (64 hex digits) for every px4_bridge (and, sim, every emulated "
                              "PX4); empty: unsigned"),
+    "enclaves": ("false", "SROS2: true starts every node with --enclave <its fully qualified name> (set "
+                          "ROS_SECURITY_KEYSTORE / ENABLE / STRATEGY; fpr_experiments README, 'Securing the ROS "
+                          "graph')"),
 }
+
+
+def launch_enclaves(values: Mapping[str, str]) -> bool:
+    """The launch argument ``enclaves`` as a boolean; ValueError for anything but true/false."""
+    text = str(values.get("enclaves", LAUNCH_ARGUMENTS["enclaves"][0])).strip().lower()
+    if text not in ("true", "false"):
+        raise ValueError(f"enclaves must be true or false, got '{text}'")
+    return text == "true"
 
 
 def launch_options(values: Mapping[str, str]) -> GraphOptions:

@@ -21,6 +21,8 @@ from fpr_experiments.recording import Topic
 
 #: [s] wall: every group process must print READY within this
 READY_TIMEOUT = 120.0
+#: [s] wall: how long the other processes keep running after a fault killed the simulator
+SIMULATOR_LINGER = 3.0
 _TIMEOUTS = re.compile(r"lockstep timeouts: (\d+)")
 _TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
 
@@ -61,7 +63,9 @@ class _Process:
 class ProcessFault:
     """Fault injection (issue 12): SIGKILL the process of ``group`` (a crash: no clean shutdown) once the
     simulation reaches ``at`` [s]; with ``restart_after`` [s of simulation time after the kill], start the same
-    command again (a supervisor restarting the node, e.g. systemd's ``Restart=on-failure``)."""
+    command again (a supervisor restarting the node, e.g. systemd's ``Restart=on-failure``). ``group``
+    "simulator" kills the simulator (no restart: the run ends ``SIMULATOR_LINGER`` wall seconds later, the other
+    processes still running, so that their reaction to the lost PX4s can be read from their logs)."""
 
     group: str
     at: float
@@ -69,12 +73,16 @@ class ProcessFault:
 
 
 class _FaultInjector:
-    """Applies :class:`ProcessFault` s from the runner's polling loop; ``events`` lists (what, sim time, wall)."""
+    """Applies :class:`ProcessFault` s from the runner's polling loop; ``events`` lists (what, sim time, wall),
+    wall as ``time.time()`` (the epoch seconds of the ROS log lines' stamps)."""
 
     def __init__(self, faults: Sequence[ProcessFault], processes: dict, commands: dict, log_dir: str) -> None:
-        unknown = sorted({f.group for f in faults} - set(commands))
+        unknown = sorted({f.group for f in faults} - set(commands) - {"simulator"})
         if unknown:
-            raise ValueError(f"fault for unknown process group(s) {unknown}; groups: {', '.join(commands)}")
+            raise ValueError(f"fault for unknown process group(s) {unknown}; groups: {', '.join(commands)}, "
+                             "simulator")
+        if any(f.group == "simulator" and f.restart_after is not None for f in faults):
+            raise ValueError("the simulator cannot be restarted (its state is the world's)")
         self.pending = sorted(faults, key=lambda f: f.at)
         self.restarts: list[tuple[float, ProcessFault]] = []
         self.processes, self.commands, self.log_dir = processes, commands, log_dir
@@ -84,7 +92,7 @@ class _FaultInjector:
         while self.pending and sim_time >= self.pending[0].at:
             fault = self.pending.pop(0)
             self.processes[fault.group].process.kill()
-            self.events.append((f"killed {fault.group}", sim_time, time.monotonic()))
+            self.events.append((f"killed {fault.group}", sim_time, time.time()))
             if fault.restart_after is not None:
                 self.restarts.append((sim_time + fault.restart_after, fault))
         for due, fault in list(self.restarts):
@@ -94,7 +102,11 @@ class _FaultInjector:
                 old.stop()
                 self.processes[fault.group] = _Process(fault.group, self.commands[fault.group], self.log_dir,
                                                        log_name=f"{fault.group}.restarted")
-                self.events.append((f"restarted {fault.group}", sim_time, time.monotonic()))
+                self.events.append((f"restarted {fault.group}", sim_time, time.time()))
+
+    @property
+    def simulator_killed(self) -> bool:
+        return any(what == "killed simulator" for what, _, _ in self.events)
 
 
 class _Clock:
@@ -167,13 +179,17 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
             if progress is not None and clock.sim_time >= next_progress:
                 next_progress += PROGRESS_PERIOD
                 progress()
+        simulator_killed = injector is not None and injector.simulator_killed
+        if simulator_killed:
+            time.sleep(SIMULATOR_LINGER)  # the others, on without it: what they say is in their logs
         completed = simulator.process.poll() == 0
         wall = time.monotonic() - start
         if simulator.process.poll() is None:
             errors.append(f"simulator did not reach {duration} s within the wall-clock budget")
-        elif simulator.process.returncode != 0:
+        elif simulator.process.returncode != 0 and not simulator_killed:
             errors.append(f"simulator exited with {simulator.process.returncode}: {simulator.lines[-5:]}")
-        recorder.wait_for("/fpr/ground_truth", duration - 0.02, timeout=10.0)
+        if not simulator_killed:
+            recorder.wait_for("/fpr/ground_truth", duration - 0.02, timeout=10.0)
         time.sleep(0.3)  # messages in flight from the other processes
         recording = recorder.snapshot()
         timeouts = [int(m.group(1)) for line in simulator.lines for m in [_TIMEOUTS.search(line)] if m]

@@ -67,6 +67,7 @@ def _launch(module, **arguments: str):
     {"backend": "sim", "n": "3", "mode": "communicating"},
     {"backend": "sim", "mode": "impedance", "cameras": "images", "scenario": "hover", "script": "integration_hover"},
     {"backend": "real", "mode": "non_communicating"},
+    {"backend": "real", "enclaves": "true"},
     {"backend": "sim", "realism": "hardware"},
     {"backend": "sim", "realism": "ideal", "scenario": "hover", "script": "integration_hover"},
 ])
@@ -82,6 +83,8 @@ def test_launch_file_builds_the_descriptions_node_list(launch_module, arguments)
         assert (kwargs["namespace"] or "") == spec.namespace
         assert kwargs["parameters"] == [*spec.params_files, spec.parameters]
         assert kwargs["remappings"] == [tuple(r) for r in spec.remappings]
+        expected_enclave = ["--enclave", spec.fully_qualified_name] if arguments.get("enclaves") == "true" else None
+        assert kwargs["ros_arguments"] == expected_enclave
     if arguments.get("realism"):
         realism = [n.kwargs["parameters"][-1]["realism"] for n in nodes if n.kwargs["executable"] in (
             "simulator", "info_link")]
@@ -104,3 +107,5 @@ def test_a_bad_launch_argument_is_one_clear_error(launch_module):
         _launch(launch_module, n="three")
     with pytest.raises(ValueError, match="realism 'rough' is not one of ideal, hardware"):
         _launch(launch_module, realism="rough")
+    with pytest.raises(ValueError, match="enclaves must be true or false"):
+        _launch(launch_module, enclaves="maybe")

@@ -214,6 +214,8 @@ class Px4BridgeNode(Node):
         self.create_timer(1.0 / float(p["status_rate"]), self._on_status)
 
         self._running = True
+        self._last_rx_wall = time.monotonic()  # when the receive thread last read a frame (the wall watchdog's)
+        self._rx_frames_read = 0
         self._rx_thread: threading.Thread | None = None
         if bool(p["receive_thread"]):
             self._rx_thread = threading.Thread(target=self._receive_loop, name="px4_bridge_rx", daemon=True)
@@ -221,12 +223,12 @@ class Px4BridgeNode(Node):
         # Under use_sim_time every timer above runs on /clock, which stops when the simulator dies: the bridge's
         # own silence check (heartbeat_timeout) would never fire. A steady-clock watchdog watches the frames.
         self.wall_silence_timeout = float(p["wall_silence_timeout"])
-        self._last_frame_wall = time.monotonic()
+        self._last_frame_wall = self._last_rx_wall
         self._rx_frames_seen = 0
         self._wall_silent_since: float | None = None
         if bool(p["receive_thread"]) and self.wall_silence_timeout > 0.0 and \
                 bool(self.get_parameter("use_sim_time").value):
-            self.create_timer(0.1, self._on_wall_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.create_timer(0.05, self._on_wall_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         address = self.link.local_address or self.link.spec.device
         self.get_logger().info(
             f"px4_bridge uav {uav_id}: {url} (bound {address}), PX4 system {target_system}, "
@@ -331,14 +333,15 @@ class Px4BridgeNode(Node):
         self.diagnostics_pub.publish(to_diagnostic_array([report], status.header.stamp))
 
     def _on_wall_watchdog(self) -> None:
-        """Steady clock, 10 Hz (use_sim_time only): no MAVLink frame for ``wall_silence_timeout`` wall seconds ->
+        """Steady clock, 20 Hz (use_sim_time only): no MAVLink frame for ``wall_silence_timeout`` wall seconds ->
         one warning and a status with ``connected`` false (the /clock-driven status timer may have stopped); one
         line again when frames come back."""
         now = time.monotonic()
         with self._lock:
             frames = self.link.counters.rx_frames
         if frames != self._rx_frames_seen:
-            self._rx_frames_seen, self._last_frame_wall = frames, now
+            # when the receive thread read them (not this tick's time: up to a period later)
+            self._rx_frames_seen, self._last_frame_wall = frames, min(now, self._last_rx_wall)
             if self._wall_silent_since is not None:
                 self.get_logger().info(f"MAVLink frames again after {now - self._wall_silent_since:.1f} s of wall "
                                        "time without any")
@@ -375,6 +378,9 @@ class Px4BridgeNode(Node):
             if not ready or not self._running:
                 continue
             self.receive_pending()
+            frames = self.link.counters.rx_frames
+            if frames != self._rx_frames_read:  # the wall watchdog's reference: when frames last came in
+                self._rx_frames_read, self._last_rx_wall = frames, time.monotonic()
 
     def receive_pending(self) -> None:
         """Read and handle every MAVLink message waiting on the link now (non-blocking): what the receive thread
