@@ -33,7 +33,7 @@ from fpr_px4_bridge.link import MavlinkLink  # noqa: E402
 from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, TeleopMode  # noqa: E402
 from fpr_px4_bridge.px4_protocol import Px4AutoSubMode, Px4MainMode  # noqa: E402
 from fpr_px4_bridge.telemetry import BodyVelocitySample, ImuSample  # noqa: E402
-from fpr_sim.scenario import scenario_from_dict  # noqa: E402
+from fpr_sim.scenario import Px4Config, scenario_from_dict  # noqa: E402
 from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
 
 CONTROL_PERIOD = 0.02  # [s] the bridge's stream period (50 Hz) and the simulation's lockstep period
@@ -200,7 +200,7 @@ def hover_flight():
         }
         record["lockstep_timeouts_streaming"] = sim.lockstep_timeouts
         # setpoint stream loss: the bridges repeat the last setpoint for setpoint_timeout, then stop; PX4's
-        # COM_OF_LOSS_T (1 s) failsafe then takes over (AUTO.LOITER: PX4's position hold, taking over bumplessly)
+        # COM_OF_LOSS_T failsafe then takes over (AUTO.LOITER: PX4's position hold, taking over bumplessly)
         rig.setpoints = None
         record["stop_at"] = stop_at = rig.now
         sent = [b.setpoints_sent for b in bridges]
@@ -318,12 +318,13 @@ def test_telemetry_is_in_each_uav_local_enu_frame_and_flu_body(hover_flight):
 def test_setpoint_stream_loss_stops_the_bridge_and_triggers_the_px4_failsafe(hover_flight):
     failsafe_at = _get(hover_flight, "px4_failsafe_at")
     setpoint_timeout = BridgeConfig().setpoint_timeout
+    loss_timeout = Px4Config().offboard_loss_timeout  # COM_OF_LOSS_T
     for stopped_after, last_sent, t_failsafe in zip(hover_flight["stream_stopped_after"],
                                                     hover_flight["last_setpoint_sent_at"], failsafe_at, strict=True):
         # the bridge repeats the last setpoint for setpoint_timeout, then stops (within one period)
         assert setpoint_timeout - CONTROL_PERIOD <= stopped_after <= setpoint_timeout + CONTROL_PERIOD + 1e-9
-        # PX4: COM_OF_LOSS_T = 1 s after the last setpoint (checked at 250 Hz, observed every 20 ms)
-        assert 1.0 <= t_failsafe - last_sent <= 1.0 + 2 * CONTROL_PERIOD + 1e-9
+        # PX4: COM_OF_LOSS_T after the last setpoint (checked at 250 Hz, observed every 20 ms)
+        assert loss_timeout <= t_failsafe - last_sent <= loss_timeout + 2 * CONTROL_PERIOD + 1e-9
     bridge_failsafe_at = hover_flight["bridge_failsafe_at"]
     assert bridge_failsafe_at is not None
     assert bridge_failsafe_at - hover_flight["stop_at"] <= setpoint_timeout + 2 * CONTROL_PERIOD
@@ -514,7 +515,7 @@ def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
         assert rate_at_px4 >= 50.0 and status.setpoint_rate >= 50.0
 
         # the controller goes silent: the bridge repeats the last setpoint for setpoint_timeout, then stops (its
-        # failsafe); PX4's offboard-loss failsafe (COM_OF_LOSS_T = 1 s) takes over: AUTO.LOITER
+        # failsafe); PX4's offboard-loss failsafe (COM_OF_LOSS_T) takes over: AUTO.LOITER
         command["setpoint"] = None
         stop_at = sim.time  # the last setpoint was published at this control period
         failsafe_at = run_until(lambda: emulator.counters.failsafes >= 1, 3.0, "PX4 failsafe")
@@ -522,7 +523,8 @@ def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
         setpoint_timeout = BridgeConfig().setpoint_timeout
         stopped_after = stream["last_at"] - stop_at
         assert setpoint_timeout - CONTROL_PERIOD <= stopped_after <= setpoint_timeout + CONTROL_PERIOD + CLOCK_STEP
-        assert 1.0 - CLOCK_STEP <= failsafe_at - stream["last_at"] <= 1.0 + 2 * CLOCK_STEP
+        loss_timeout = Px4Config().offboard_loss_timeout  # COM_OF_LOSS_T
+        assert loss_timeout - CLOCK_STEP <= failsafe_at - stream["last_at"] <= loss_timeout + 2 * CLOCK_STEP
         run_until(lambda: statuses[-1].failsafe and statuses[-1].mode_name == "AUTO.LOITER", 2.0, "status failsafe")
         status = statuses[-1]
         assert status.state == UavStatus.STATE_FAILSAFE and status.connected and status.armed

@@ -118,7 +118,7 @@ def fault_graph(case: FaultCase, scenario_file: str, px4_log_file: str,
 #: overrides per executable and scenario overrides (the emulated PX4s' failsafe, fpr_sim Px4Config)
 ALTERNATIVES: dict[str, dict[str, Any]] = {
     "guard": {"description": "swarm guard (default): every UAV Hold on a fault, AUTO.LAND after 5 s unless it "
-                             "clears (rejoin); the lost UAV's PX4: COM_OF_LOSS_T 1 s, Hold COM_FAIL_ACT_T 5 s, Land",
+                             "clears (rejoin); the lost UAV's PX4: COM_OF_LOSS_T 0.5 s, Hold COM_FAIL_ACT_T 5 s, Land",
               "parameters": {"px4_bridge": {"swarm_guard": True}}, "scenario": {}},
     "no_guard": {"description": "no swarm response (before issue 12): only the lost UAV's PX4 failsafe acts; the "
                                 "others fall back to NC (4.32) and fly on",

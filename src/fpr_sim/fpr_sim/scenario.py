@@ -131,7 +131,10 @@ class Px4Config:
     rate_integrator_limit: float = 0.3  #: |K_I ∫ε| bound [N m]
     max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
     controller_rate: float = 250.0  #: attitude/rate loop [Hz]
-    offboard_loss_timeout: float = 1.0  #: COM_OF_LOSS_T [s]: offboard signal = a setpoint younger than this
+    #: COM_OF_LOSS_T [s]: offboard signal = a setpoint younger than this. The FPR's PX4s: 0.5 s (PX4's default
+    #: 1.0 s, range 0-60; older trees 0.5): a UAV whose bridge died flies its last attitude until then, and the
+    #: legs start to fold within it (docs/safety.md: bridge killed, tilt 33.5° with 1 s, 19.4° with 0.5 s)
+    offboard_loss_timeout: float = 0.5
     failsafe_hold_time: float = 5.0  #: offboard/RC loss: Hold this long before Land [s] (PX4 COM_FAIL_ACT_T, 5 s)
     land_disarm_delay: float = 2.0  #: COM_DISARM_LAND: disarm after this long landed (LAND, or after flight) [s]
     disarm_preflight_timeout: float = 10.0  #: COM_DISARM_PRFLT: disarm if armed this long without take-off [s]

@@ -240,7 +240,10 @@ def test_offboard_loss_in_flight_holds_then_lands(hover):
         z = _platform_z(sim)
         lowest, highest = min(lowest, z), max(highest, z)
     assert all(e.custom_mode == HOLD_MODE for e in sim.emulators)
-    assert highest - z0 < 0.3 and z0 - lowest < 0.3  # really holding (entered while moving: it brakes first)
+    # really holding, not landing (AUTO.LAND would descend 0.7 m/s x 5 s = 3.5 m) nor climbing. Not rigid: after
+    # COM_OF_LOSS_T of frozen attitudes the legs fold slowly in Hold (the structure's negative stiffness against
+    # PX4's position loop): measured 0.39 m down in 5 s with the FPR's 0.5 s, < 0.3 m with PX4's default 1 s
+    assert highest - z0 < 0.3 and z0 - lowest < 0.5
     hover.advance(0.1)
     assert all(e.custom_mode == LAND_MODE for e in sim.emulators)
     assert all(e.counters.failsafes == 1 for e in sim.emulators)
