@@ -94,7 +94,7 @@ class ControllerNode(Node):
         def set_attribute(attribute: str):
             return lambda v: setattr(self, attribute, float(v))
 
-        self.local_timeout = dyn("local_state_timeout", 0.5, "[s] LocalState older -> invalid",
+        self.local_timeout = dyn("local_state_timeout", 0.2, "[s] LocalState older -> invalid",
                                  set_attribute("local_timeout"), low=0.001, high=10.0)
         self.imu_timeout = dyn("imu_timeout", 0.5, "[s] IMU older -> yaw from LocalState.uav_yaw",
                                set_attribute("imu_timeout"), low=0.001, high=10.0)

@@ -99,7 +99,7 @@ _PARAMETERS = {
     "info_topic": ("/fpr/info", "InformationVector topic the controllers read (proof of life of each peer's "
                                 "controller for the swarm guard)"),
     "peer_status_topic": ("/fpr/uav{uav}/status", "UavStatus topic of UAV {uav} (the peers' bridges)"),
-    "estimate_deadline": Param(0.3, "[s] own controller_status without a valid local state this long: emergency "
+    "estimate_deadline": Param(0.15, "[s] own controller_status without a valid local state this long: emergency "
                                "(pose estimator dead or blind)", low=0.02, high=60.0),
     "peer_status_deadline": Param(0.5, "[s] a peer's status this old while its zeta arrives: its bridge died: "
                                   "emergency", low=0.05, high=60.0),

@@ -53,7 +53,7 @@ class Cause(Enum):
 class SwarmGuardConfig:
     enabled: bool = True
     uav_id: int = 1
-    estimate_deadline: float = 0.3       #: [s] own controller without a valid local state this long -> OWN
+    estimate_deadline: float = 0.15      #: [s] own controller without a valid local state this long -> OWN
     peer_status_deadline: float = 0.5    #: [s] a peer's UavStatus this old while its ζ arrives -> PEER
     peer_silence_deadline: float = 5.0   #: [s] neither UavStatus nor ζ from a peer this long -> PEER
     max_height: float = 10.0             #: [m] above the take-off point (PX4 local position) -> ENVELOPE

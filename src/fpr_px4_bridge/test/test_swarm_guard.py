@@ -43,9 +43,10 @@ def test_own_causes_setpoints_then_estimate():
     guard = healthy_guard()
     verdict = guard.evaluate(0.1, setpoints_fresh=False, flying=True)
     assert verdict.cause is Cause.SETPOINTS and verdict.own and "controller" in verdict.reason
-    guard.on_own_controller_status(False, 0.2)  # the estimator died: no valid local state since 0.0
-    assert guard.evaluate(0.25, True, True) == NONE  # within estimate_deadline (0.3 s)
-    verdict = guard.evaluate(0.31, True, True)
+    guard.on_own_controller_status(False, 0.1)  # the estimator died: no valid local state since 0.0
+    deadline = guard.config.estimate_deadline
+    assert guard.evaluate(deadline - 0.01, True, True) == NONE  # within estimate_deadline
+    verdict = guard.evaluate(deadline + 0.01, True, True)
     assert verdict.cause is Cause.ESTIMATE and verdict.own and "estimator" in verdict.reason
     guard.on_own_controller_status(True, 0.4)
     assert guard.evaluate(0.41, True, True) == NONE
@@ -57,6 +58,7 @@ def test_a_peer_own_emergency_is_followed_but_a_peer_following_is_not_echoed():
     verdict = guard.evaluate(0.15, True, True)
     assert verdict.cause is Cause.PEER and not verdict.own and "uav2" in verdict.reason
     guard.on_peer_status(2, 8, False, "following uav3", 0.2)  # uav2 only follows: no echo back
+    own_controller_fine(guard, 0.2)
     assert guard.evaluate(0.25, True, True) == NONE
 
 
