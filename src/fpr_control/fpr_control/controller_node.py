@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.diagnostics import OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param
+from fpr_model.node_parameters import NodeParameters, Param, throttle
 from fpr_model.parameters import default_parameters, load_parameters
 from fpr_model.rotations import quat_to_euler_zyx
 from rclpy.node import Node
@@ -269,7 +269,7 @@ class ControllerNode(Node):
     def _on_local(self, msg: LocalState) -> None:
         if msg.uav_id not in (0, self.config.uav_id):
             self.get_logger().warning(f"LocalState from uav {msg.uav_id} ignored (I am {self.config.uav_id})",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         local = LocalEstimate(
             leg_angle=msg.leg_angle, platform_roll=msg.platform_roll, platform_pitch=msg.platform_pitch,
@@ -277,7 +277,7 @@ class ControllerNode(Node):
             relative_yaw=msg.relative_yaw, uav_yaw=msg.uav_yaw, valid=bool(msg.valid))
         if not local.is_finite():
             self.get_logger().warning("LocalState contains NaN/inf or a zero quaternion: ignored",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         self._local, self._local_time = local, self._now()
 
@@ -293,14 +293,14 @@ class ControllerNode(Node):
         for line in table.take_announcements():  # once per intruder stream / takeover
             self.get_logger().warning(f"/fpr/info: {line}")
         for line in table.take_returns():
-            self.get_logger().info(f"/fpr/info: {line}", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().info(f"/fpr/info: {line}", **throttle(self, LOG_THROTTLE_S))
         if reason is not None:
-            self.get_logger().warning(f"/fpr/info rejected: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning(f"/fpr/info rejected: {reason}", **throttle(self, LOG_THROTTLE_S))
 
     def _on_teleop(self, msg: TeleopCommand) -> None:
         if len(msg.leg_angles) != self.n or len(msg.leg_rates) != self.n:
             self.get_logger().warning(f"TeleopCommand with {len(msg.leg_angles)} leg angles (n = {self.n}): ignored",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         command = TeleopReference(
             _vec(msg.platform_velocity), _vec(msg.platform_acceleration), msg.yaw_rate, msg.yaw_acceleration,
@@ -308,21 +308,21 @@ class ControllerNode(Node):
             np.array(msg.leg_rates, dtype=float), msg.contact_force, int(msg.mode))
         if not command.is_finite():
             self.get_logger().warning("TeleopCommand contains NaN/inf: ignored (holding the last one)",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         bounded = bound_command(command, self.command_limits)
         if bounded.command is None:
             self._teleop_refused += 1
             self.get_logger().warning(f"TeleopCommand refused: {bounded.refused}: holding the last valid command "
                                       f"({self._teleop_refused} refused in a row)",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         if self._teleop_refused:
             self.get_logger().info(f"TeleopCommand accepted again after {self._teleop_refused} refused")
             self._teleop_refused = 0
         if bounded.clamped:
             self.get_logger().warning("TeleopCommand clamped to the controller's limits: " + ", ".join(bounded.clamped),
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
         self._teleop, self._teleop_time = bounded.command, self._now()
 
     def _on_imu(self, msg: Imu) -> None:
@@ -330,7 +330,7 @@ class ControllerNode(Node):
         norm = float(np.linalg.norm(quat))
         if not np.all(np.isfinite(quat)) or not 0.5 < norm < 1.5:
             self.get_logger().warning("Imu orientation is not a finite unit quaternion: ignored",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         self._imu_yaw, self._imu_time = quat_to_euler_zyx(quat / norm)[2], self._now()
 
@@ -338,7 +338,7 @@ class ControllerNode(Node):
         n = self.n
         if len(msg.leg_angles) != n or len(msg.leg_rates) != n or len(msg.uav_poses) != n:
             self.get_logger().warning("FprState arrays do not have n entries: ignored",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
             return
         gt = GroundTruth(
             _vec(msg.platform_pose.position), _quat_wxyz(msg.platform_pose.orientation),
@@ -346,7 +346,7 @@ class ControllerNode(Node):
             np.array(msg.leg_angles, dtype=float), np.array(msg.leg_rates, dtype=float),
             np.array([_quat_wxyz(p.orientation) for p in msg.uav_poses]))
         if not gt.is_finite():
-            self.get_logger().warning("FprState contains NaN/inf: ignored", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning("FprState contains NaN/inf: ignored", **throttle(self, LOG_THROTTLE_S))
             return
         self._ground_truth = gt
 
@@ -365,11 +365,11 @@ class ControllerNode(Node):
                 return
             self.get_logger().warning(
                 f"mode {self.config.mode}: falling back to NC (4.32): {', '.join(stale) or 'own echo missing'} "
-                f"(info_timeout {timeout:g} s)", throttle_duration_sec=1.0)
+                f"(info_timeout {timeout:g} s)", **throttle(self, 1.0))
         elif not active and previous is not None:
             self._fallback_since = None
             self.get_logger().info(f"mode {self.config.mode}: every zeta fresh, mode {self.config.mode} active (NC "
-                                   f"for {now - previous:.2f} s)", throttle_duration_sec=1.0)
+                                   f"for {now - previous:.2f} s)", **throttle(self, 1.0))
 
     def _on_tick(self) -> None:
         now = self._now()
@@ -380,21 +380,21 @@ class ControllerNode(Node):
             if self._had_local:
                 self.get_logger().warning(
                     f"no fresh LocalState for {self.local_timeout} s: holding (check this UAV's pose_estimator and "
-                    f"camera: ros2 topic hz local_state)", throttle_duration_sec=LOG_THROTTLE_S)
+                    f"camera: ros2 topic hz local_state)", **throttle(self, LOG_THROTTLE_S))
             else:  # the estimator waits for its first consistent detections: the normal start-up (issue 14)
                 self.get_logger().info("waiting for the first LocalState (start-up): holding",
-                                       throttle_duration_sec=LOG_THROTTLE_S)
+                                       **throttle(self, LOG_THROTTLE_S))
         command = self._teleop
         if command is not None and now - self._teleop_time > self.teleop_timeout:
             command = command.stopped()
             self.get_logger().warning("no TeleopCommand: zero velocities, holding the configuration",
-                                      throttle_duration_sec=LOG_THROTTLE_S)
+                                      **throttle(self, LOG_THROTTLE_S))
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
         out = self.controller.step(now, local, command, self._ground_truth, imu_yaw)
         if out.warning and not self._had_local and not self.controller.uses_ground_truth:
-            self.get_logger().info(out.warning + " (start-up)", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().info(out.warning + " (start-up)", **throttle(self, LOG_THROTTLE_S))
         elif out.warning:
-            self.get_logger().warning(out.warning, throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning(out.warning, **throttle(self, LOG_THROTTLE_S))
         stamp = self.get_clock().now().to_msg()
         uav_id = self.config.uav_id
 

@@ -22,7 +22,7 @@ import math
 import os
 
 import yaml
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, throttle
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -122,18 +122,18 @@ class TeleopNode(Node):
     def _on_joy(self, msg: Joy) -> None:
         reason = self.filter.joy(self._now(), list(msg.axes), list(msg.buttons))
         if reason is not None:
-            self.get_logger().warning(f"Joy ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning(f"Joy ignored: {reason}", **throttle(self, LOG_THROTTLE_S))
 
     def _on_info(self, msg: InformationVector) -> None:
         reason = self.reported_legs.receive(int(msg.uav_id), msg.leg_angle, bool(msg.valid), self._now())
         if reason is not None:
-            self.get_logger().warning(f"/fpr/info ignored: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning(f"/fpr/info ignored: {reason}", **throttle(self, LOG_THROTTLE_S))
 
     def _on_target(self, msg: PoseStamped) -> None:
         p, q = msg.pose.position, msg.pose.orientation
         reason = self.target.receive(self._now(), (p.x, p.y, p.z), (q.w, q.x, q.y, q.z), msg.header.frame_id)
         if reason is not None:
-            self.get_logger().warning(f"/fpr/target refused: {reason}", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning(f"/fpr/target refused: {reason}", **throttle(self, LOG_THROTTLE_S))
 
     def _on_tick(self) -> None:
         now = self._now()
@@ -172,7 +172,7 @@ class TeleopNode(Node):
         msg.leg_rates = [float(v) for v in out.leg_rates]
         msg.contact_force = float(out.contact_force)
         if not all(math.isfinite(v) for v in [msg.roll, msg.pitch, msg.contact_force, *msg.leg_angles]):
-            self.get_logger().warning("teleop output not finite: not published", throttle_duration_sec=LOG_THROTTLE_S)
+            self.get_logger().warning("teleop output not finite: not published", **throttle(self, LOG_THROTTLE_S))
             return
         self.pub.publish(msg)
 

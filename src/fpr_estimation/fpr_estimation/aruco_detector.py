@@ -13,7 +13,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from fpr_model.calibration import CameraModel
-from fpr_model.node_parameters import NodeParameters, Param
+from fpr_model.node_parameters import NodeParameters, Param, throttle
 from fpr_model.rotations import rotmat_to_quat
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -80,7 +80,7 @@ class ArucoDetectorNode(Node):
         try:
             camera = CameraModel.from_camera_info(msg.width, msg.height, list(msg.k), list(msg.d))
         except ValueError as error:
-            self.get_logger().warning(f"camera_info refused: {error}", throttle_duration_sec=self._log_interval)
+            self.get_logger().warning(f"camera_info refused: {error}", **throttle(self, self._log_interval))
             return
         if camera != self._camera:
             self.get_logger().info(f"camera: {camera.width}×{camera.height}, fx={camera.fx:.1f}, fy={camera.fy:.1f}")
@@ -90,13 +90,13 @@ class ArucoDetectorNode(Node):
         self.frames += 1
         if self._camera is None:
             self.get_logger().warning("image received but no camera_info yet: no detection",
-                                      throttle_duration_sec=self._log_interval)
+                                      **throttle(self, self._log_interval))
             return
         try:
             image = decode_image(msg.encoding, msg.width, msg.height, msg.step, msg.data)
             observation = self._detector.detect(image, self._camera)
         except (ValueError, cv2.error) as error:
-            self.get_logger().warning(f"image refused: {error}", throttle_duration_sec=self._log_interval)
+            self.get_logger().warning(f"image refused: {error}", **throttle(self, self._log_interval))
             return
         if observation is None:
             return

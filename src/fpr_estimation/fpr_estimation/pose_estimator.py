@@ -21,7 +21,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.calibration import EULER_ORDERS, CameraModel, EulerZxzPose, VisionCalibration
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param
+from fpr_model.node_parameters import NodeParameters, Param, throttle
 from fpr_model.rotations import inverse_pose
 from geometry_msgs.msg import TransformStamped, TwistStamped
 from rclpy.node import Node
@@ -204,7 +204,7 @@ class PoseEstimatorNode(Node):
         valid = out.valid
         if rec is None:
             self.get_logger().warning("no valid IMU attitude yet: reconstruction unavailable, valid = false",
-                                      throttle_duration_sec=self._log_interval)
+                                      **throttle(self, self._log_interval))
             valid = False
             msg.uav_attitude_flat.w = 1.0
         else:

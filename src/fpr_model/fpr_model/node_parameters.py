@@ -184,3 +184,11 @@ class NodeParameters:
                 value = parameter.value
                 apply(list(value) if not isinstance(value, (str, bool, int, float)) else value)
                 self.node.get_logger().info(f"parameter {parameter.name} = {value!r} applied")
+
+
+def throttle(node, seconds: float) -> dict[str, Any]:
+    """Keyword arguments of a throttled log call (``node.get_logger().warning(text, **throttle(node, 5.0))``) that
+    rate-limits on the node's own clock — simulated time under ``use_sim_time`` — instead of rclpy's default, the
+    system clock: a simulated flight then logs the same lines whatever the machine's load (a slow run is longer in
+    wall time and would print more of them)."""
+    return {"throttle_duration_sec": float(seconds), "throttle_time_source_type": node.get_clock()}

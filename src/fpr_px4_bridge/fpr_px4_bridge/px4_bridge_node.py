@@ -189,7 +189,11 @@ class Px4BridgeNode(Node):
         self._log = _EventLog(self.get_logger())
 
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint, best_effort)
+        # the setpoint reliable, keeping only the newest: the controller is on this computer, so a loss is the
+        # machine's load, and a lost setpoint is a missed control period (and stalls the simulator's lockstep,
+        # which waits for it); depth 1 never delivers a superseded one late
+        self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint,
+                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
         self.create_subscription(TeleopCommand, p["teleop_topic"], self._on_teleop, best_effort)
         if self.config.guard.enabled:
             self.create_subscription(InformationVector, p["info_topic"], self._on_info, best_effort)

@@ -129,6 +129,9 @@ class Simulation:
         self._served_ms: list[int | None] = [None] * n  # latest setpoint instant when T_{k-1} was passed [ms]
         self._stream_live = [False] * n  # a new setpoint arrived during the previous control period
         self.lockstep_timeouts = 0
+        #: called while the lockstep waits at a boundary, every <= 50 ms, with the wall seconds waited so far (the
+        #: simulator node re-publishes /clock: a lost last /clock would otherwise stall every timer on it)
+        self.on_lockstep_wait: Callable[[float], None] | None = None
         self.lockstep_waits = 0
         #: per UAV: the link's setpoint stamps are on a foreign clock (module doc): the lockstep does not wait for it
         self.foreign_clock = [False] * n
@@ -282,6 +285,8 @@ class Simulation:
                         " s wall: a node of the graph is dead or hung (set lockstep_on_timeout continue to fly on)")
                 break
             self.lockstep_waits += 1
+            if self.on_lockstep_wait is not None:
+                self.on_lockstep_wait(self.options.lockstep_timeout - remaining)
             readable, _, _ = select.select(missing, [], [], min(remaining, 0.05))
             for emulator in readable:
                 emulator.poll(t)

@@ -64,6 +64,10 @@ def _pose(position, quat_wxyz) -> Pose:
                 orientation=Quaternion(x=x, y=y, z=z, w=w))
 
 
+#: [s] wall: while the lockstep waits, /clock is re-published this often (SimulatorNode._on_lockstep_wait)
+CLOCK_REPEAT_S = 0.25
+
+
 class SimulatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("simulator", **kwargs)
@@ -123,6 +127,8 @@ class SimulatorNode(Node):
         log_file = str(get("px4_log_file").value)
         self.px4_log = Px4Log(log_file, self.sim.emulators) if log_file else None
         self.sim.on_notice = self.get_logger().warning
+        self.sim.on_lockstep_wait = self._on_lockstep_wait
+        self._clock_republished_at = 0.0
         self.real_time_factor = max(0.0, float(get("real_time_factor").value))
         self.clock_period = 1.0 / min(250.0, max(1.0, float(get("clock_rate").value)))
         self.truth_period = 1.0 / max(1.0, float(get("ground_truth_rate").value))
@@ -203,6 +209,19 @@ class SimulatorNode(Node):
                 return
             executor.spin_once(timeout_sec=0.05)
         self.get_logger().info(f"/clock has its {expected} subscriptions: starting the simulation")
+
+    def _on_lockstep_wait(self, waited: float) -> None:
+        """While the lockstep waits at a boundary: /clock again (same time) every CLOCK_REPEAT_S of wall time. Every
+        node's /clock subscription is best effort (rclpy's TimeSource), so a lost last /clock would leave the
+        controllers' timers stopped and the lockstep waiting for their setpoints until its watchdog; a repeated
+        time changes nothing for a node that had it."""
+        if waited < self._clock_republished_at + CLOCK_REPEAT_S:
+            if waited < self._clock_republished_at:
+                self._clock_republished_at = 0.0  # a new wait
+            return
+        self._clock_republished_at = waited
+        if rclpy.ok(context=self.context):
+            self.clock_pub.publish(Clock(clock=_stamp(self.sim.time)))
 
     def step(self) -> bool:
         """Advance one ``/clock`` period (lockstep included), publish what is due, pace to

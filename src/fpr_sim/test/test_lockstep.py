@@ -252,3 +252,18 @@ def test_a_stamp_far_behind_the_simulation_is_a_foreign_clock(rig):
     controllers.send(now_ms(sim), uavs=[2])
     sim.advance(2 * PERIOD)  # read during the first period, classified at the next boundary
     assert sim.foreign_clock == [True, False, False]
+
+
+def test_the_wait_hook_is_called_while_waiting_with_the_wall_time_waited(rig):
+    """While a boundary waits, Simulation.on_lockstep_wait gets the wall seconds waited so far, increasing, every
+    <= 50 ms, up to the watchdog (the simulator node re-publishes /clock from it)."""
+    sim, controllers = rig
+    waited: list[float] = []
+    sim.on_lockstep_wait = waited.append
+    fresh_periods(sim, controllers, 3)
+    assert all(w < TIMEOUT / 2 for w in waited)  # on time: at most a poll for the datagram in flight
+    waited.clear()
+    sim.advance(PERIOD)  # the controllers stalled: one wait, to the watchdog
+    assert sim.lockstep_timeouts == 1
+    assert waited and waited == sorted(waited)  # (TIMEOUT is one poll here)
+    assert 0.0 <= waited[0] < 0.05 and waited[-1] <= TIMEOUT + 1e-3
