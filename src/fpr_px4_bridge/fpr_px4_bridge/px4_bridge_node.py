@@ -189,11 +189,9 @@ class Px4BridgeNode(Node):
         self._log = _EventLog(self.get_logger())
 
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
-        # the setpoint reliable, keeping only the newest: the controller is on this computer, so a loss is the
-        # machine's load, and a lost setpoint is a missed control period (and stalls the simulator's lockstep,
-        # which waits for it); depth 1 never delivers a superseded one late
-        self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint,
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+        # best effort (REP-2003: any controller's publisher connects, reliable or not); a lost setpoint is a
+        # missed control period, and in the simulator's lockstep a wait for the next one (its watchdog names it)
+        self.create_subscription(AttitudeThrustSetpoint, "setpoint", self._on_setpoint, best_effort)
         self.create_subscription(TeleopCommand, p["teleop_topic"], self._on_teleop, best_effort)
         if self.config.guard.enabled:
             self.create_subscription(InformationVector, p["info_topic"], self._on_info, best_effort)
@@ -353,6 +351,14 @@ class Px4BridgeNode(Node):
             return
         silence = now - self._last_frame_wall
         if frames == 0 or silence < self.wall_silence_timeout:  # never heard (start-up): the link is simply down
+            return
+        if self._now() <= 0.0:
+            # heard, then silent before the first /clock: the simulator is waiting for its subscribers (a
+            # multi-process start), nominal; once the clock runs a silence is a lost PX4 again
+            if self._wall_silent_since is None:
+                self._wall_silent_since = self._last_frame_wall
+                self.get_logger().info(f"no MAVLink frame for {silence:.1f} s of wall time before the simulation "
+                                       "clock started (the simulator is waiting for the graph)")
             return
         if self._wall_silent_since is None:
             self._wall_silent_since = self._last_frame_wall

@@ -103,6 +103,7 @@ class SwarmGuard:
         self.config = config
         self.peers: dict[int, PeerState] = {}
         self._estimate_valid_time: float | None = None  #: last own controller status with a valid local state
+        self._own_status_time = -math.inf  #: last own controller status, valid or not
         self._height: float | None = None
         self._takeoff_height: float | None = None
         self._climb_since: float | None = None
@@ -128,6 +129,7 @@ class SwarmGuard:
             peer.info_time = now
 
     def on_own_controller_status(self, local_state_valid: bool, now: float) -> None:
+        self._own_status_time = now
         if local_state_valid:
             self._estimate_valid_time = now
 
@@ -181,6 +183,10 @@ class SwarmGuard:
             return Verdict(Cause.SETPOINTS, "own controller's setpoints stale (controller dead or hung)")
         last_valid = self._estimate_valid_time
         if last_valid is not None and now - last_valid > cfg.estimate_deadline:
+            status_age = now - self._own_status_time
+            if status_age > cfg.estimate_deadline:  # no status at all: the controller, not the estimator
+                return Verdict(Cause.ESTIMATE, f"own controller silent for {status_age:.2f} s (controller dead or "
+                                               "hung)")
             return Verdict(Cause.ESTIMATE, f"own controller without a valid local state for {now - last_valid:.2f} "
                                            "s (pose estimator dead or blind)")
         for uav_id in sorted(self.peers):

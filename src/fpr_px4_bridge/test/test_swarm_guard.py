@@ -48,6 +48,8 @@ def test_own_causes_setpoints_then_estimate():
     assert guard.evaluate(deadline - 0.01, True, True) == NONE  # within estimate_deadline
     verdict = guard.evaluate(deadline + 0.01, True, True)
     assert verdict.cause is Cause.ESTIMATE and verdict.own and "estimator" in verdict.reason
+    # a controller whose status stopped altogether is named as such (not its estimator)
+    assert "controller silent" in guard.evaluate(0.1 + deadline + 0.01, True, True).reason
     guard.on_own_controller_status(True, 0.4)
     assert guard.evaluate(0.41, True, True) == NONE
 
