@@ -74,6 +74,10 @@ class LockstepStalled(RuntimeError):
     """The lockstep waited ``lockstep_timeout`` wall seconds for a live setpoint stream (see the module doc)."""
 
 
+#: [s] a scenario that starts hovering (armed in OFFBOARD) holds its hover setpoint as an offboard stream this long
+#: (PX4's offboard-loss failsafe after it, unless the graph's stream took over): a simulation convenience
+HOVER_START_WINDOW = 1.5
+
 @dataclass
 class SimulationOptions:
     """Timing and networking of the simulator core."""
@@ -163,7 +167,9 @@ class Simulation:
             emulator.main_mode, emulator.sub_mode = Px4MainMode.OFFBOARD, 0
             emulator.quat_local = self.sensors.world_to_local_quat(i, quats[i])
             emulator.thrust = float(np.linalg.norm(forces[i]) / f_max[i])
-            emulator._last_setpoint_time = 0.0
+            # the held setpoint counts as a stream for HOVER_START_WINDOW: the graph's own stream (the joy script's
+            # ARM + FLY) takes over within it, whatever COM_OF_LOSS_T (0.5 s alone was a start-up race)
+            emulator._last_setpoint_time = HOVER_START_WINDOW - emulator.config.offboard_loss_timeout
 
     # ------------------------------------------------------------------------------------------------
     @property
