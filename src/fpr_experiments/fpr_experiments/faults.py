@@ -167,10 +167,77 @@ def run_fault(case: FaultCase, output_dir: str, *, parameters: Mapping[str, Mapp
         delays = link_loss_delays(os.path.join(output_dir, "logs"), killed[0][2], 3)
         metrics = {"fault_time_s": float(fault_time), **{f"link_lost_uav{i}_s": d for i, d in delays.items()},
                    "link_lost_s": max(delays.values())}
-        return FaultResult(case, metrics, events, output_dir, completed, errors)
+        result = FaultResult(case, metrics, events, output_dir, completed, errors)
+        _write_result(result)
+        return result
     metrics = fault_metrics(record, read_px4_log(px4_log_file), fault_time,
                             scenario.quadrotor.landing_gear_height)
-    return FaultResult(case, metrics, events, output_dir, completed, errors)
+    result = FaultResult(case, metrics, events, output_dir, completed, errors)
+    _write_result(result)
+    return result
+
+
+RESULT_FILE = "result.json"
+
+
+def _write_result(result: FaultResult) -> None:
+    import json
+    from dataclasses import asdict
+
+    with open(os.path.join(result.output_dir, RESULT_FILE), "w", encoding="utf-8") as stream:
+        json.dump({"case": asdict(result.case), "metrics": result.metrics, "events": result.events,
+                   "completed": result.completed, "errors": result.errors[:20]}, stream, indent=1)
+
+
+def truth_from_mcap(path: str):
+    """The ground-truth series :func:`fault_metrics` needs (t, position, quat, uav_positions; n), read back from a
+    flight's MCAP (``/fpr/ground_truth``)."""
+    from types import SimpleNamespace
+
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+
+    from fpr_msgs.msg import FprState
+
+    t, position, quat, uavs = [], [], [], []
+    with open(path, "rb") as stream:
+        for _schema, _channel, message in make_reader(stream).iter_messages(topics=["/fpr/ground_truth"]):
+            m = deserialize_message(message.data, FprState)
+            p, q = m.platform_pose.position, m.platform_pose.orientation
+            t.append(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
+            position.append([p.x, p.y, p.z])
+            quat.append([q.w, q.x, q.y, q.z])
+            uavs.append([[u.position.x, u.position.y, u.position.z] for u in m.uav_poses])
+    truth = SimpleNamespace(t=np.array(t), position=np.array(position), quat=np.array(quat),
+                            uav_positions=np.array(uavs))
+    return SimpleNamespace(truth=truth, n=truth.uav_positions.shape[1])
+
+
+def result_from_folder(folder: str) -> FaultResult:
+    """A fault flight's result from its folder: ``result.json`` if the run wrote one, else recomputed from its
+    flight.mcap, px4_log.csv and scenario.yaml (the case from the folder's name, ``<node>_<dead|restartS>_s<seed>``,
+    the fault instant its nominal time)."""
+    import json
+
+    from fpr_sim.px4_log import read_px4_log
+    from fpr_sim.scenario import load_scenario
+
+    path = os.path.join(folder, RESULT_FILE)
+    if os.path.exists(path):
+        with open(path, encoding="utf-8") as stream:
+            data = json.load(stream)
+        return FaultResult(FaultCase(**data["case"]), data["metrics"], [tuple(e) for e in data["events"]], folder,
+                           data["completed"], data["errors"])
+    match = re.fullmatch(r"(.+)_(dead|restart([0-9.]+))_s(\d+)", os.path.basename(folder.rstrip("/")))
+    if not match:
+        raise ValueError(f"{folder}: no {RESULT_FILE} and not a fault folder name")
+    case = FaultCase(node=match.group(1), restart_after=float(match.group(3)) if match.group(3) else None,
+                     seed=int(match.group(4)))
+    scenario = load_scenario(os.path.join(folder, "scenario.yaml"))
+    metrics = fault_metrics(truth_from_mcap(os.path.join(folder, "flight.mcap")),
+                            read_px4_log(os.path.join(folder, "px4_log.csv")), case.at,
+                            scenario.quadrotor.landing_gear_height)
+    return FaultResult(case, metrics, [], folder, True)
 
 
 #: a bridge's wall-watchdog line: ``[WARN] [<epoch s>] [<logger>…px4_bridge]: PX4 lost: …`` (rcutils' default
@@ -293,6 +360,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output-dir", default=os.path.join("reports", "faults"))
     parser.add_argument("--results", default="", help="write the Markdown report here (e.g. docs/safety.md)")
     parser.add_argument("--real-time-factor", type=float, default=0.5)
+    parser.add_argument("--report-only", action="store_true",
+                        help="fly nothing: the report from the flights already in --output-dir (their result.json, "
+                             "or recomputed from their MCAP and PX4 log)")
     args = parser.parse_args(argv)
     try:
         extra: dict[str, dict[str, Any]] = {}
@@ -305,7 +375,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     start = time.monotonic()
     sections = []
-    for alternative in args.alternatives:
+    if args.report_only:
+        for alternative in args.alternatives:
+            root = os.path.join(args.output_dir, alternative)
+            folders = sorted(os.path.join(root, d) for d in os.listdir(root)) if os.path.isdir(root) else []
+            results = [result_from_folder(f) for f in folders if os.path.exists(os.path.join(f, "px4_log.csv"))]
+            results = [r for r in results if r.case.node in args.nodes and r.case.seed in args.seeds]
+            sections.append((alternative, ALTERNATIVES[alternative]["description"], results))
+        alternatives = []
+    else:
+        alternatives = args.alternatives
+    for alternative in alternatives:
         spec = ALTERNATIVES[alternative]
         parameters = {k: dict(v) for k, v in spec["parameters"].items()}
         for executable, values in extra.items():
