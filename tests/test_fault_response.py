@@ -3,11 +3,12 @@ robot; asserting on the ground truth and on every SET_ATTITUDE_TARGET the emulat
 
 - UAV 2's controller SIGKILLed mid-hover, not restarted: the swarm guard brings the robot down together — tilt
   < 30°, nobody climbs > 0.5 m, every PX4 disarmed within 15 s, touchdown < 1 m/s, never more than full thrust;
+- the same controller restarted 2 s later (another seed): it rejoins, and the robot holds hover;
 - the simulator SIGKILLed (every PX4 gone at once, /clock stops): every bridge says "PX4 lost" within 1 s of
   wall time (its steady-clock watchdog; its /clock-driven checks stop with the clock).
 
 The whole matrix (controller / px4_bridge / pose_estimator × dead / restarted after 2 s × 5 seeds, and the
-alternatives) is ``bash scripts/run_faults.sh --results docs/safety.md``: ~40 min, too long for this suite.
+simulator) is ``bash scripts/run_faults.sh --results docs/safety.md``: ~1 h, too long for this suite.
 """
 
 from __future__ import annotations
@@ -20,6 +21,13 @@ from fpr_experiments.faults import FaultCase, run_fault
 def controller_killed(tmp_path_factory):
     return run_fault(FaultCase(node="controller", uav=2, seed=0),
                      str(tmp_path_factory.mktemp("controller_killed")),
+                     parameters={"px4_bridge": {"swarm_guard": True}}, log=False)
+
+
+@pytest.fixture(scope="module")
+def controller_restarted(tmp_path_factory):
+    return run_fault(FaultCase(node="controller", uav=2, restart_after=2.0, seed=1),
+                     str(tmp_path_factory.mktemp("controller_restarted")),
                      parameters={"px4_bridge": {"swarm_guard": True}}, log=False)
 
 
@@ -42,6 +50,17 @@ def test_a_dead_controller_brings_the_robot_down_together(controller_killed):
     assert m["touchdown_speed_mps"] < 1.0  # NaN (some UAV never came down to its landing gear) fails too
     assert m["hover_held"] == 0.0
     assert m["max_thrust_received"] <= 1.0  # normalized: 1 = f_max
+
+
+def test_a_controller_restarted_within_2_s_rejoins_and_the_robot_holds_hover(controller_restarted):
+    result = controller_restarted
+    m = result.metrics
+    print(f"\n[faults] {result.case.label}: {m}")
+    assert [e[0] for e in result.events] == ["killed uav2_controller", "restarted uav2_controller"]
+    assert result.errors == []
+    assert m["max_tilt_deg"] < 30.0 and m["max_climb_m"] < 0.5
+    assert m["hover_held"] == 1.0  # every PX4 armed in OFFBOARD again, level within 8°, height within 0.4 m
+    assert m["max_thrust_received"] <= 1.0
 
 
 def test_every_bridge_says_the_simulator_died_within_a_second(simulator_killed):

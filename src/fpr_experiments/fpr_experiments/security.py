@@ -43,7 +43,8 @@ EXTERNAL_INPUTS: dict[str, tuple[str, str]] = {
     r"^/fpr/ground/joy$": ("/fpr/ground/joy_node", "a ROS joy driver (instead of fpr_control's joystick)"),
 }
 #: the read-only enclave of the ground's tools (Foxglove bridge, rqt, ``ros2 topic echo``, ``ros2 param get``): it
-#: may subscribe to every topic and call the nodes' read-only parameter services, publish nothing but its log
+#: may subscribe to every topic and call the nodes' read-only parameter services, publish nothing but what every
+#: rcl node does (its log, its parameter events)
 MONITOR_ENCLAVE = "/fpr/ground/monitor"
 READ_ONLY_PARAMETER_SERVICES = ("describe_parameters", "get_parameter_types", "get_parameters", "list_parameters",
                                 "get_type_description")
@@ -169,7 +170,7 @@ def policy_enclaves(nodes: Sequence[Endpoints]) -> list[Endpoints]:
     enclaves = [*nodes, *sorted(external.values(), key=lambda e: e.enclave)]
     monitor = Endpoints(MONITOR_ENCLAVE, "/fpr/ground", "monitor", external="read-only tools on the ground "
                         "(Foxglove bridge, rqt, ros2 topic echo, ros2 param get): subscribe to all, set nothing")
-    monitor.publish = {"/rosout"}
+    monitor.publish = set(COMMON_PUBLISH)  # every rcl node creates these two publishers
     monitor.subscribe = set().union(*(e.publish for e in enclaves))
     monitor.request = {s for e in nodes for s in e.reply if s.rsplit("/", 1)[-1] in READ_ONLY_PARAMETER_SERVICES}
     return [*enclaves, monitor]

@@ -90,7 +90,7 @@ def test_the_monitor_reads_everything_and_sets_nothing(shipped):
     monitor = policy[MONITOR_ENCLAVE]
     published = set().union(*(rules["publish"] for enclave, rules in policy.items() if enclave != MONITOR_ENCLAVE))
     assert monitor["subscribe"] == published
-    assert monitor["publish"] == {"/rosout"}
+    assert monitor["publish"] == {"/rosout", "/parameter_events"}  # what every rcl node publishes
     assert monitor["request"] and not any(s.endswith(("/set_parameters", "/set_parameters_atomically"))
                                           for s in monitor["request"])
     assert not monitor["reply"]
