@@ -106,14 +106,19 @@ class OffboardConfig:
     #: so that a UAV whose bridge died, in PX4's own Hold-then-Land failsafe, lands with the others)
     emergency_hold_time: float = 5.0
     rejoin_delay: float = 0.5            #: [s] EMERGENCY: the cause must stay clear this long before rejoining
+    #: [s] an emergency within this long of the last rejoin is a flapping cause (e.g. an estimator that keeps losing
+    #: its track after a restart): no more rejoins, AUTO.LAND at once, said as this UAV's own so the swarm follows
+    rejoin_window: float = 10.0
 
     def __post_init__(self) -> None:
         if self.offboard_warmup < 1.0:
             raise ValueError("offboard_warmup must be >= 1.0 s (PX4 needs > 1 s of stream before OFFBOARD)")
         if self.heartbeat_timeout <= 0.0 or self.command_retry_interval <= 0.0 or self.command_max_attempts < 1:
             raise ValueError("heartbeat_timeout and command_retry_interval must be > 0, command_max_attempts >= 1")
-        if not (0.0 <= self.emergency_hold_time < 600.0 and 0.0 <= self.rejoin_delay < 60.0):
-            raise ValueError("emergency_hold_time must be in [0, 600) s and rejoin_delay in [0, 60) s")
+        if not (0.0 <= self.emergency_hold_time < 600.0 and 0.0 <= self.rejoin_delay < 60.0
+                and 0.0 <= self.rejoin_window < 3600.0):
+            raise ValueError("emergency_hold_time must be in [0, 600) s, rejoin_delay in [0, 60) s and "
+                             "rejoin_window in [0, 3600) s")
 
 
 @dataclass(frozen=True)
@@ -185,6 +190,7 @@ class OffboardStateMachine:
         self._emergency_landing = False  #: EMERGENCY: the hold is over, AUTO.LAND commanded
         self._clear_since: float | None = None  #: [s] EMERGENCY: the cause has been clear since
         self._rejoining = False  #: WARMUP after an EMERGENCY (a new verdict sends it back)
+        self._last_rejoin: float | None = None  #: [s] the last EMERGENCY -> WARMUP (rejoin_window)
         self.emergency: Verdict | None = None  #: the verdict that holds the EMERGENCY (None outside it)
 
     # ---- inputs ----------------------------------------------------------------------------------------
@@ -225,16 +231,24 @@ class OffboardStateMachine:
             self._rejoining = False
             if state != BridgeState.EMERGENCY:
                 self.emergency = None
+            if state == BridgeState.IDLE:
+                self._last_rejoin = None  # landed: a new flight
 
     def _enter_emergency(self, now: float, verdict: Verdict, context: str = "") -> None:
         """OFFBOARD (or a rejoin) -> EMERGENCY: PX4 Hold now, AUTO.LAND after emergency_hold_time (module doc)."""
+        since_rejoin = None if self._last_rejoin is None else now - self._last_rejoin
+        if since_rejoin is not None and since_rejoin < self.config.rejoin_window and not verdict.latched:
+            verdict = Verdict(Cause.REPEATED, f"{verdict.reason}, again {since_rejoin:.1f} s after a rejoin "
+                                              f"(rejoin_window {self.config.rejoin_window:g} s)", latched=True)
         source = "own fault" if verdict.own else "following the swarm"
+        landing = verdict.cause is Cause.REPEATED
         self._enter(BridgeState.EMERGENCY, "error",
-                    f"swarm emergency ({source}{context}): {verdict.reason}; PX4 Hold now, AUTO.LAND after "
-                    f"{self.config.emergency_hold_time:g} s unless it clears")
+                    f"swarm emergency ({source}{context}): {verdict.reason}; " + (
+                        "no more rejoins: AUTO.LAND now" if landing else
+                        f"PX4 Hold now, AUTO.LAND after {self.config.emergency_hold_time:g} s unless it clears"))
         self.emergency = verdict
         self._emergency_since = now
-        self._emergency_landing = False
+        self._emergency_landing = landing
         self._clear_since = None
 
     def on_frame(self, now: float) -> None:
@@ -407,8 +421,10 @@ class OffboardStateMachine:
         if self.custom_mode_seen and not self.armed and connected:
             self._enter(BridgeState.IDLE, "info", "disarmed during the emergency response (landed)")
             return
-        active = verdict is not None and verdict.emergency
         held = self.emergency or Verdict(Cause.PEER, "unknown")
+        if held.cause is Cause.REPEATED:  # latched by the state machine: keep it (and land), whatever comes
+            verdict = held
+        active = verdict is not None and verdict.emergency
         if active:
             self.emergency = verdict
             self._clear_since = None
@@ -432,6 +448,7 @@ class OffboardStateMachine:
                                 f"{held.reason}): rejoining, OFFBOARD once the stream has run "
                                 f"{cfg.offboard_warmup:g} s")
                     self._rejoining = True
+                    self._last_rejoin = now
                     return
         if self._emergency_landing:
             if not self.px4_mode.is_land and not self._request(SET_LAND, now, decision):

@@ -96,6 +96,8 @@ _PARAMETERS = {
     "emergency_hold_time": Param(5.0, "[s] the emergency's Hold before AUTO.LAND: set PX4's COM_FAIL_ACT_T to the "
                                  "same value (a UAV whose bridge died lands with the others)", high=600.0),
     "rejoin_delay": Param(0.5, "[s] an emergency's cause must stay clear this long before the UAV rejoins", high=60.0),
+    "rejoin_window": Param(10.0, "[s] an emergency within this long of the last rejoin: no more rejoins, AUTO.LAND "
+                                 "now, as this UAV's own (a flapping cause lands the swarm)", high=3600.0),
     "info_topic": ("/fpr/info", "InformationVector topic the controllers read (proof of life of each peer's "
                                 "controller for the swarm guard)"),
     "peer_status_topic": ("/fpr/uav{uav}/status", "UavStatus topic of UAV {uav} (the peers' bridges)"),
@@ -171,7 +173,8 @@ class Px4BridgeNode(Node):
                 command_retry_interval=float(p["command_retry_interval"]),
                 command_max_attempts=int(p["command_max_attempts"]),
                 kill_flight_termination=bool(p["kill_flight_termination"]),
-                emergency_hold_time=float(p["emergency_hold_time"]), rejoin_delay=float(p["rejoin_delay"])),
+                emergency_hold_time=float(p["emergency_hold_time"]), rejoin_delay=float(p["rejoin_delay"]),
+                rejoin_window=float(p["rejoin_window"])),
             guard=SwarmGuardConfig(
                 enabled=bool(p["swarm_guard"]), uav_id=uav_id, estimate_deadline=float(p["estimate_deadline"]),
                 peer_status_deadline=float(p["peer_status_deadline"]),

@@ -47,6 +47,9 @@ class Cause(Enum):
     ENVELOPE = "envelope"
     PX4 = "px4"  #: PX4 left OFFBOARD on its own (its failsafe): judged by the state machine, not the guard
     PEER = "peer"
+    #: an emergency again soon after a rejoin (a flapping cause): judged by the state machine; latched, own, so the
+    #: whole swarm lands instead of cycling Hold / OFFBOARD
+    REPEATED = "repeated"
 
 
 @dataclass(frozen=True)
@@ -83,7 +86,7 @@ class Verdict:
 
     @property
     def own(self) -> bool:
-        return self.cause in (Cause.SETPOINTS, Cause.ESTIMATE, Cause.ENVELOPE, Cause.PX4)
+        return self.cause in (Cause.SETPOINTS, Cause.ESTIMATE, Cause.ENVELOPE, Cause.PX4, Cause.REPEATED)
 
 
 @dataclass

@@ -210,6 +210,47 @@ def test_a_new_fault_during_the_rejoin_returns_to_the_emergency():
     assert m.state == BridgeState.EMERGENCY
 
 
+def _rejoined(m, at: float) -> None:
+    """EMERGENCY (peer) at ``at``, clear from at + 0.5, rejoined and back in OFFBOARD by at + 1.2."""
+    m.step(at, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, at + 0.05)
+    m.step(at + 0.5, True, NONE)
+    m.step(at + 1.01, True, NONE)
+    assert m.state == BridgeState.WARMUP
+    m.step(at + 1.03, True, NONE)
+    m.on_heartbeat(ARMED, OFFBOARD, at + 1.1)
+    m.step(at + 1.12, True, NONE)
+    assert m.state == BridgeState.OFFBOARD
+
+
+def test_an_emergency_soon_after_a_rejoin_lands_the_swarm_instead_of_cycling():
+    """A flapping cause (an estimator that keeps losing its track after a restart, seen in the fault runs): the
+    second emergency within rejoin_window of a rejoin is latched, this UAV's own (the peers follow), AUTO.LAND now."""
+    m = flying_machine()
+    _rejoined(m, 1.0)
+    m.on_heartbeat(ARMED, OFFBOARD, 4.0)
+    d = m.step(4.0, True, PEER)
+    assert m.state == BridgeState.EMERGENCY
+    assert m.emergency.cause is Cause.REPEATED and m.emergency.own and m.emergency.latched
+    assert "AUTO.LAND" in labels(d) and any("no more rejoins" in e.text for e in d.events)
+    for t in (4.5, 5.0, 6.0):  # the cause clears: no rejoin, still landing
+        m.on_heartbeat(ARMED, LAND, t)
+        m.step(t, True, NONE)
+        assert m.state == BridgeState.EMERGENCY and m.emergency.cause is Cause.REPEATED
+    m.on_heartbeat(DISARMED, LAND, 9.0)
+    m.step(9.0, True, NONE)
+    assert m.state == BridgeState.IDLE
+
+
+def test_an_emergency_long_after_a_rejoin_is_an_ordinary_one():
+    m = flying_machine()
+    _rejoined(m, 1.0)
+    later = 1.0 + m.config.rejoin_window + 1.5
+    m.on_heartbeat(ARMED, OFFBOARD, later)
+    d = m.step(later, True, PEER)
+    assert m.state == BridgeState.EMERGENCY and m.emergency == PEER and labels(d) == ["AUTO.LOITER"]
+
+
 def test_px4_leaving_offboard_on_its_own_is_an_own_emergency_and_px4_landing_is_followed():
     m = flying_machine()
     m.on_heartbeat(ARMED, LAND, 1.0)  # PX4's own failsafe
