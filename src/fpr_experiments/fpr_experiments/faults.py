@@ -379,6 +379,7 @@ def main(argv: list[str] | None = None) -> int:
         for alternative in args.alternatives:
             root = os.path.join(args.output_dir, alternative)
             folders = sorted(os.path.join(root, d) for d in os.listdir(root)) if os.path.isdir(root) else []
+            folders = [f for f in folders if os.path.basename(f).startswith(tuple(f"{n}_" for n in args.nodes))]
             results = [result_from_folder(f) for f in folders if os.path.exists(os.path.join(f, "px4_log.csv"))]
             results = [r for r in results if r.case.node in args.nodes and r.case.seed in args.seeds]
             sections.append((alternative, ALTERNATIVES[alternative]["description"], results))
