@@ -229,6 +229,8 @@ def result_from_folder(folder: str) -> FaultResult:
         return FaultResult(FaultCase(**data["case"]), data["metrics"], [tuple(e) for e in data["events"]], folder,
                            data["completed"], data["errors"])
     match = re.fullmatch(r"(.+)_(dead|restart([0-9.]+))_s(\d+)", os.path.basename(folder.rstrip("/")))
+    if match and match.group(1) == "simulator":
+        raise ValueError(f"a simulator kill needs the {RESULT_FILE} its run wrote (its delays are in wall time)")
     if not match:
         raise ValueError(f"{folder}: no {RESULT_FILE} and not a fault folder name")
     case = FaultCase(node=match.group(1), restart_after=float(match.group(3)) if match.group(3) else None,
@@ -380,7 +382,12 @@ def main(argv: list[str] | None = None) -> int:
             root = os.path.join(args.output_dir, alternative)
             folders = sorted(os.path.join(root, d) for d in os.listdir(root)) if os.path.isdir(root) else []
             folders = [f for f in folders if os.path.basename(f).startswith(tuple(f"{n}_" for n in args.nodes))]
-            results = [result_from_folder(f) for f in folders if os.path.exists(os.path.join(f, "px4_log.csv"))]
+            results = []
+            for folder in folders:
+                try:
+                    results.append(result_from_folder(folder))
+                except (ValueError, OSError) as error:  # e.g. an older simulator kill without its result.json
+                    print(f"[faults] {folder} left out of the report: {error}", file=sys.stderr)
             results = [r for r in results if r.case.node in args.nodes and r.case.seed in args.seeds]
             sections.append((alternative, ALTERNATIVES[alternative]["description"], results))
         alternatives = []

@@ -231,6 +231,7 @@ class Px4BridgeNode(Node):
         self._last_frame_wall = self._last_rx_wall
         self._rx_frames_seen = 0
         self._wall_silent_since: float | None = None
+        self._pre_clock_silence_said = False
         if bool(p["receive_thread"]) and self.wall_silence_timeout > 0.0 and \
                 bool(self.get_parameter("use_sim_time").value):
             self.create_timer(0.05, self._on_wall_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -358,8 +359,8 @@ class Px4BridgeNode(Node):
         if self._now() <= 0.0:
             # heard, then silent before the first /clock: the simulator is waiting for its subscribers (a
             # multi-process start), nominal; once the clock runs a silence is a lost PX4 again
-            if self._wall_silent_since is None:
-                self._wall_silent_since = self._last_frame_wall
+            if not self._pre_clock_silence_said:
+                self._pre_clock_silence_said = True
                 self.get_logger().info(f"no MAVLink frame for {silence:.1f} s of wall time before the simulation "
                                        "clock started (the simulator is waiting for the graph)")
             return
