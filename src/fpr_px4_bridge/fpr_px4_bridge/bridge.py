@@ -8,10 +8,14 @@ One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` 
   the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
 - :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
 
-Stream rate: exactly ONE SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. The ticks
-(the node's timer at ``stream_rate``) cut time into slots of one period; a tick less than 0.6 T after the tick
-that opened the current slot does not open another (a timer late by up to 0.4 T, then on time, or a caller
-ticking at twice the rate, adds no frame). In each slot:
+Stream rate: exactly ONE SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. Time is
+cut into slots of one period on a fixed grid of the clock, slot k = [k T, (k + 1) T) (a tick or a setpoint within
+1e-6 T before a boundary counts as after it: float rounding of the clock); the first tick or setpoint in a new slot
+opens it, so a late timer, a timer ticking at twice the rate or a controller out of phase adds no frame and never
+shifts the slots. (Before, a slot was opened by a tick at least 0.6 T after the previous one: one late tick at
+0.4 T shifted the slots so that every later setpoint of a controller on the grid was held one period — in the
+simulation's lockstep, which waits for each period's setpoint, that stalled the graph: seen under load in CI.)
+In each slot:
 
 - a new setpoint goes out at once if nothing was sent in the slot yet; otherwise it is held and sent by the tick
   that opens the next slot, as that slot's frame: a new setpoint leaves within one period (the latest one wins);
@@ -77,8 +81,8 @@ __all__ = ["BridgeConfig", "BridgeStatus", "Px4Bridge", "SetpointResult"]
 
 #: A battery voltage older than this is not used for the thrust normalization [s].
 _VOLTAGE_MAX_AGE = 5.0
-#: A tick opens a new stream slot only this many stream periods after the tick that opened the current one.
-_SLOT_MIN = 0.6
+#: [stream periods] a tick or setpoint this close before a slot boundary counts as in the next slot (clock rounding).
+_SLOT_EPSILON = 1e-6
 
 
 @dataclass(frozen=True)
@@ -188,7 +192,7 @@ class Px4Bridge:
         self.boot_time = boot_time  # local time that our time_boot_ms counts from
         self._setpoint: _Setpoint | None = None
         self._setpoint_unsent = False  #: the latest setpoint has not been transmitted yet
-        self._slot_start: float | None = None  #: [s] the tick that opened the current stream slot
+        self._slot: int | None = None  #: index k of the current stream slot [k T, (k + 1) T)
         self._slot_used = False  #: a SET_ATTITUDE_TARGET was sent in the current slot
         self._last_heartbeat_sent = -math.inf
         self._sent_times: deque[float] = deque()
@@ -245,11 +249,13 @@ class Px4Bridge:
             self.rejected_setpoints += 1
             self._event("warn", "setpoint.refused", reason + " (not forwarded)")
             return SetpointResult(accepted=False, sent=False, reason=reason)
+        streaming = self.machine.stream_allowed()
+        self._open_slot(now, stream=False)  # a new slot opened by a setpoint needs no top-up of the closing one
         self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now,
                                    time_boot_ms=self.setpoint_time_boot_ms(stamp, now))
         self._setpoint_unsent = True
         sent = False
-        if self.machine.stream_allowed() and not self._slot_used:
+        if streaming and not self._slot_used:
             sent = self._transmit(now)  # else held: the tick opening the next slot sends it (module doc)
         return SetpointResult(accepted=True, sent=sent)
 
@@ -328,18 +334,23 @@ class Px4Bridge:
         self.repetitions_sent += int(repetition)
         return True
 
-    def _stream_slots(self, now: float, stream: bool) -> None:
-        """The tick's part of the stream-rate rule (module doc): at a slot boundary, top up the closing slot if it
-        carried no frame, open the next slot and send a held setpoint in it. ``stream``: the state machine streams
-        now (a fresh setpoint exists). Times [s]."""
-        period = 1.0 / self.config.stream_rate
-        if self._slot_start is not None and self._slot_start <= now < self._slot_start + _SLOT_MIN * period:
-            return  # too soon after the last boundary: timer jitter, or a caller ticking faster than stream_rate
-        if stream and not self._slot_used:
+    def _open_slot(self, now: float, stream: bool) -> bool:
+        """Open the grid slot of ``now`` [s] if it is a new one (module doc): first top up the closing slot if it
+        carried no frame (``stream``: the state machine streams and a fresh setpoint exists). True if opened."""
+        slot = math.floor(now * self.config.stream_rate + _SLOT_EPSILON)
+        if self._slot is not None and slot <= self._slot:
+            return False  # same slot: timer jitter, a caller ticking faster than stream_rate, a second setpoint
+        if stream and self._slot is not None and not self._slot_used:
             self._transmit(now)  # the closing slot's frame: a repetition (or a setpoint not sent before)
-        self._slot_start = now
+        self._slot = slot
         self._slot_used = False
-        if stream and self._setpoint_unsent:
+        return True
+
+    def _stream_slots(self, now: float, stream: bool) -> None:
+        """The tick's part of the stream-rate rule (module doc): at a slot boundary, top up the closing slot, open
+        the next one and send a held setpoint in it. ``stream``: the state machine streams now (a fresh setpoint
+        exists). Times [s]."""
+        if self._open_slot(now, stream) and stream and self._setpoint_unsent:
             self._transmit(now)  # held new setpoint: the new slot's frame
 
     def setpoint_rate(self, now: float) -> float:

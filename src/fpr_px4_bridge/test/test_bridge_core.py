@@ -307,21 +307,21 @@ def test_set_attitude_target_carries_the_setpoint_stamp_on_px4_boot_clock_and_ke
     bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.0, stamp=99.99)
     (msg,) = kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")[-1:]
     assert msg[1].time_boot_ms == 100_000  # bridge boot_time 0
-    bridge.tick(100.0)  # opens the next 20 ms stream slot
+    bridge.tick(100.0)  # the same 20 ms stream slot [100.00, 100.02): the next setpoint goes out in the next one
     # telemetry stamped 40.000 s on PX4's boot clock arrives at ROS time 100.002: offset 60.002 s
     _attitude_quaternion(peer, 40_000)
     bridge.poll(100.002, timeout=1.0)
     assert bridge.telemetry.mapper.offset == pytest.approx(60.002)
-    result = bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.010, stamp=100.005)
+    result = bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=100.020, stamp=100.005)
     assert result.sent
-    for t in (100.02, 100.04, 100.06):  # no new setpoint: the slots ending at 100.04 and 100.06 get repetitions
+    for t in (100.04, 100.06, 100.08):  # no new setpoint: the slots ending at 100.06 and 100.08 get repetitions
         bridge.tick(t)
     frames = [m for _, m in kinds([(0, m) for m in peer.read()], "SET_ATTITUDE_TARGET")]
     assert len(frames) == 3 and {m.time_boot_ms for m in frames} == {40_003} and bridge.repetitions_sent == 2
     # zero stamp ("none"): 'now' mapped; NaN or another clock's stamp: 'now' mapped, with a warning
     for k, (stamp, warned) in enumerate(((0.0, False), (math.nan, True), (5.0, True))):
         bridge.take_events()
-        now = 100.081 + 0.02 * k
+        now = 100.101 + 0.02 * k
         bridge.tick(now - 0.001)  # tops up the slot that ends (a repetition) and opens a fresh one
         peer.read()
         bridge.submit_setpoint(Q_NORTH, 10.0, 1, now=now, stamp=stamp)

@@ -127,6 +127,25 @@ def test_controller_at_the_stream_rate_each_setpoint_once_at_once(rig, phase, or
     assert (len(times) - 1) / (times[-1] - times[0]) == pytest.approx(RATE, rel=1e-6)
 
 
+@pytest.mark.parametrize("order", [-1, 1])
+@pytest.mark.parametrize("lateness", [0.0045, 0.008, 0.009, 0.015])
+def test_one_late_tick_with_its_controller_does_not_hold_later_setpoints(rig, lateness, order):
+    """Simulation time, a loaded machine (seen in CI): ONE tick and the controller's setpoint of the same period
+    both run late (their /clock came late), every other one on the grid k T. Each setpoint must still leave at
+    its submission: the simulation's lockstep waits for each period's setpoint, so one held for a period stalls
+    the graph. (The former slot rule, a new slot only 0.6 T after the tick that opened the current one, held every
+    later setpoint after a tick late by more than 0.4 T.)"""
+    r = rig()
+    duration, late_k = 1.0, 12
+    n = int(round(duration / T))
+    late = np.zeros(n)
+    late[late_k] = lateness
+    submits = [(round(k * T + late[k], 9), order, "submit", k) for k in range(n)]
+    r.run(_ticks(duration, late=late) + submits)
+    assert max(r.first_frame_delays()) == 0.0 and len(r.first_frame_delays()) == n
+    assert len(r.times()) == n and r.bridge.repetitions_sent == 0
+
+
 @pytest.mark.parametrize("phase", [0.0, 0.001, 0.01, 0.019])
 def test_jittered_controller_and_late_ticks_keep_the_rate_exact_and_the_delay_within_one_period(rig, phase):
     """Submission jitter of ±4 ms and tick lateness of 0-2 ms (seeded): the number of frames is the number of
@@ -175,13 +194,15 @@ def test_faster_controller_is_thinned_to_the_stream_rate_and_the_newest_setpoint
 
 
 def test_a_faster_tick_caller_does_not_speed_the_stream_up(rig):
-    """Ticks at 100 Hz: one setpoint, then repetitions at exactly 50 Hz until setpoint_timeout."""
+    """Ticks at 100 Hz: one setpoint, then repetitions at exactly 50 Hz until setpoint_timeout. The first
+    repetition closes the first slot without a new setpoint, [T, 2T): at 2T."""
     r = rig(setpoint_timeout=1.0)
     r.submit(0.0, 0)
     r.run(_ticks(0.9, period=T / 2))
     times = r.times()
-    np.testing.assert_allclose(np.diff(times), T, atol=1e-9)
-    assert len(times) == 45 and r.bridge.repetitions_sent == 44
+    assert times[0] == 0.0 and times[1] == pytest.approx(2 * T)
+    np.testing.assert_allclose(np.diff(times[1:]), T, atol=1e-9)
+    assert len(times) == 44 and r.bridge.repetitions_sent == 43
 
 
 def test_stalled_controller_repetitions_at_the_rate_then_stop_after_setpoint_timeout(rig):
