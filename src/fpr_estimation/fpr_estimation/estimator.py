@@ -17,6 +17,9 @@ Safety (issue 12, DESIGN.md §5b; bounds in :class:`~fpr_estimation.gating.Input
 - implausible IMU samples (NaN/inf, non-unit quaternion, rate or specific force beyond the sensor's range, a
   stamp going back or far in the future) are refused and do not propagate the filter: the next valid sample
   integrates over the gap if it is at most ``max_prediction_step``, otherwise the gap is reported and skipped;
+  a gap of ``imu_gap_reset`` or more (the IMU stream died and came back: a restarted bridge, PX4 rebooted)
+  resets an initialised filter, which re-initialises from K consistent detections: its relative attitude misses
+  an unknown rotation, and a filter that carried on from it flew the restarted UAV into its peers' legs;
 - implausible detections (NaN/inf, behind the camera, beyond the camera range, stamped in the future) are refused;
 - (re-)initialisation only from K mutually consistent detections (:class:`~fpr_estimation.gating.ConsistentRun`);
   an initialised filter is replaced only after ``min_lost_time`` s without an accepted detection: a
@@ -82,6 +85,7 @@ class EstimatorConfig:
     reinit: ReinitConfig = field(default_factory=ReinitConfig)  #: when detections may (re-)initialise the filter
     stale_timeout: float = 0.5  #: [s]
     max_prediction_step: float = 0.1  #: [s] longer IMU gaps are not integrated (reported)
+    imu_gap_reset: float = 0.5  #: [s] an IMU gap this long resets an initialised filter (0: never)
 
     def __post_init__(self) -> None:
         if self.filter not in FILTER_KINDS:
@@ -90,6 +94,9 @@ class EstimatorConfig:
             raise ValueError(f"uav_id must be in 1..{self.n}, got {self.uav_id}")
         if not (self.stale_timeout > 0.0 and self.max_prediction_step > 0.0 and self.platform_radius > 0.0):
             raise ValueError("stale_timeout, max_prediction_step and platform_radius must be positive")
+        if self.imu_gap_reset != 0.0 and not self.imu_gap_reset >= self.max_prediction_step:
+            raise ValueError(f"imu_gap_reset must be 0 (never) or >= max_prediction_step "
+                             f"({self.max_prediction_step:g} s), got {self.imu_gap_reset}")
 
 
 @dataclass(frozen=True)
@@ -165,7 +172,8 @@ class PoseEstimatorCore:
         self.pending_detections = 0  #: seen while not initialised, before K consistent ones
         self.consecutive_rejections = 0
         self.initialisations = 0  #: first initialisations and re-initialisations
-        self.resets = 0  #: filter reset after a non-finite state or covariance
+        self.resets = 0  #: filter resets: a non-finite state or covariance, or an IMU gap >= imu_gap_reset
+        self._reset_cause = ""  #: why the last reset happened (for the not-initialised line)
         self.imu_gaps = 0  #: IMU gaps longer than max_prediction_step (not integrated)
         self.refused: dict[str, int] = {}  #: refused inputs per kind (imu_rate, detection_distance, ...)
         self.last_gate: GateDecision | None = None
@@ -224,6 +232,9 @@ class PoseEstimatorCore:
             self.candidates.clear()  # their attitudes cannot be propagated over the gap
             reason = (f"IMU gap of {dt:.3g} s (> max_prediction_step {self.config.max_prediction_step:g} s) not "
                       f"integrated: the relative attitude misses that rotation")
+            if self.filter.initialized and 0.0 < self.config.imu_gap_reset <= dt:
+                self._reset(f"an IMU gap of {dt:.3g} s (>= imu_gap_reset {self.config.imu_gap_reset:g} s)")
+                reason += "; filter reset"
             self._emit("imu_gap", "warning", reason)
             return reason
         self.candidates.propagate(self.body_rate, dt)
@@ -364,14 +375,18 @@ class PoseEstimatorCore:
         """After each predict / correct: reset the filter if its state or covariance is not finite."""
         if self.filter.is_healthy():
             return True
+        self._reset(f"a non-finite state or covariance after the {step}", level="error")
+        return False
+
+    def _reset(self, cause: str, level: str = "warning") -> None:
+        """Forget the filter (and the candidates): it re-initialises from K consistent detections; said once."""
         self.filter.reset()
         self.candidates.clear()
         self.resets += 1
-        self._emit("reset", "error",
-                   f"filter state or covariance not finite after the {step}: filter reset, local_state not "
-                   f"published until it re-initialises from {self.config.reinit.consistent_detections} consistent "
-                   f"detections")
-        return False
+        self._reset_cause = cause
+        self._emit("reset", level,
+                   f"filter reset after {cause}: local_state not published until it re-initialises from "
+                   f"{self.config.reinit.consistent_detections} consistent detections")
 
     def _accept(self, stamp: float) -> None:
         self.accepted_detections += 1
@@ -386,7 +401,7 @@ class PoseEstimatorCore:
             # before the first initialisation this is the normal start-up (INFO, issue 14); after a reset it is not
             if self.resets:
                 self._emit("not_initialised", "warning",
-                           f"filter reset after a non-finite state: local_state not published until "
+                           f"filter reset after {self._reset_cause}: local_state not published until "
                            f"{self.config.reinit.consistent_detections} consistent detections "
                            f"({len(self.candidates)} so far); check the IMU and camera inputs")
             elif self.initialisations == 0:

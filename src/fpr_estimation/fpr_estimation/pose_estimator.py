@@ -59,6 +59,8 @@ _PARAMETERS = {
     "gate_angle_error_limit": (math.radians(16.0), "[rad] threshold gate: cap of the growing attitude bound"),
     "stale_timeout": (0.5, "[s] no accepted detection for this long: valid = false (prediction continues)"),
     "max_prediction_step": (0.1, "[s] IMU gaps longer than this are not integrated (reported)"),
+    "imu_gap_reset": (0.5, "[s] an IMU gap this long resets an initialised filter: it re-initialises from K "
+                      "consistent detections (a restarted bridge or PX4); 0: never"),
     # Input guards (issue 12): refused inputs never reach the filter.
     "max_body_rate": (35.0, "[rad/s] IMU samples with a larger |rate| are refused (PX4 gyro range, 2000 deg/s)"),
     "max_specific_force": (16.0 * STANDARD_GRAVITY,
@@ -123,7 +125,8 @@ class PoseEstimatorNode(Node):
                                 float(p["reinit_position_tolerance"]), float(p["reinit_angle_tolerance"]),
                                 float(p["reinit_min_lost_time"])),
             stale_timeout=float(p["stale_timeout"]),
-            max_prediction_step=float(p["max_prediction_step"]))
+            max_prediction_step=float(p["max_prediction_step"]),
+            imu_gap_reset=float(p["imu_gap_reset"]))
         self.core = PoseEstimatorCore(config, calibration)
         self._frame_id = str(p["frame_id"]) or f"uav{config.uav_id}/platform"
         self._tf_parent = str(p["body_frame_id"]) or f"uav{config.uav_id}/base_link"

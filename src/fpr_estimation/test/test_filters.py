@@ -180,9 +180,11 @@ def test_bad_inputs_are_refused_without_crashing():
     _initialise(core, 0.0, make_transform(np.eye(3), [0.5, 0.0, -0.9]))
     core.on_imu(0.0, np.array([1.0, 0, 0, 0]), np.zeros(3))
     assert "back" in core.on_imu(-0.1, np.array([1.0, 0, 0, 0]), np.zeros(3))
-    assert "gap" in core.on_imu(1.0, np.array([1.0, 0, 0, 0]), np.zeros(3))
-    out = core.output(1.0)
+    assert "gap" in core.on_imu(0.3, np.array([1.0, 0, 0, 0]), np.zeros(3))  # reported, below imu_gap_reset
+    out = core.output(0.6)  # no detection for 0.6 s > stale_timeout
     assert np.isfinite(out.position).all() and np.isfinite(out.quaternion).all() and not out.valid
+    assert "filter reset" in core.on_imu(1.3, np.array([1.0, 0, 0, 0]), np.zeros(3))  # >= imu_gap_reset
+    assert core.output(1.3) is None
     with pytest.raises(ValueError):
         EstimatorConfig(filter="ukf")
     with pytest.raises(ValueError):

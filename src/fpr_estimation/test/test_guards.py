@@ -419,3 +419,33 @@ def test_threshold_gate_bound_grows_with_the_time_without_an_accepted_detection(
     assert not evaluate_gate(fixed, innovation, None, lost=5.0).accepted
     with pytest.raises(ValueError, match="growth"):
         GateConfig(position_error_limit=0.05)
+
+
+@pytest.mark.parametrize("gap, resets", [(0.3, False), (0.5, True), (2.7, True)])
+def test_a_long_imu_gap_resets_the_filter_until_consistent_detections(gap, resets):
+    """A restarted bridge (issue 12): the IMU stream stops for ``gap`` s and comes back. Below imu_gap_reset
+    (0.5 s) the gap is only reported; at or above it the filter is reset (its relative attitude misses an unknown
+    rotation), local_state is not published, and K consistent detections re-initialise it."""
+    core = PoseEstimatorCore(EstimatorConfig(max_prediction_step=0.1, imu_gap_reset=0.5))
+    core.on_imu(0.0, IDENTITY, np.zeros(3))
+    _initialise(core)
+    core.take_events()
+    reason = core.on_imu(gap, IDENTITY, np.zeros(3))
+    assert "gap" in reason and ("filter reset" in reason) == resets
+    events = core.take_events()
+    assert [e.kind for e in events] == (["reset", "imu_gap"] if resets else ["imu_gap"])
+    assert core.filter.initialized != resets and core.resets == int(resets)
+    if not resets:
+        assert core.output(gap).valid
+        return
+    assert "IMU gap" in events[0].message and events[0].level == "warning"
+    assert core.output(gap) is None and "IMU gap" in core.take_events()[0].message
+    decisions = [core.on_relative_pose(gap + 0.05 * (k + 1), POSE) for k in range(4)]
+    assert [d.accepted for d in decisions] == [False, False, False, True]
+    assert core.output(gap + 0.2).valid
+
+
+def test_imu_gap_reset_below_max_prediction_step_is_refused():
+    with pytest.raises(ValueError, match="imu_gap_reset"):
+        EstimatorConfig(max_prediction_step=0.1, imu_gap_reset=0.05)
+    assert EstimatorConfig(imu_gap_reset=0.0).imu_gap_reset == 0.0  # never
