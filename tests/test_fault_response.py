@@ -20,15 +20,13 @@ from fpr_experiments.faults import FaultCase, run_fault
 @pytest.fixture(scope="module")
 def controller_killed(tmp_path_factory):
     return run_fault(FaultCase(node="controller", uav=2, seed=0),
-                     str(tmp_path_factory.mktemp("controller_killed")),
-                     parameters={"px4_bridge": {"swarm_guard": True}}, log=False)
+                     str(tmp_path_factory.mktemp("controller_killed")), log=False)
 
 
 @pytest.fixture(scope="module")
 def controller_restarted(tmp_path_factory):
     return run_fault(FaultCase(node="controller", uav=2, restart_after=2.0, seed=1),
-                     str(tmp_path_factory.mktemp("controller_restarted")),
-                     parameters={"px4_bridge": {"swarm_guard": True}}, log=False)
+                     str(tmp_path_factory.mktemp("controller_restarted")), log=False)
 
 
 @pytest.fixture(scope="module")

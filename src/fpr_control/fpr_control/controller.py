@@ -65,6 +65,7 @@ from fpr_control.reference import (
     TeleopReference,
     decentralized_reference,
 )
+from fpr_control.rejoin import RejoinConfig, RejoinRamp
 from fpr_control.setpoints import (
     hover_thrust_share,
     local_frame_attitude,
@@ -149,6 +150,7 @@ class ControllerConfig:
     impedance_force_input: str = "interaction"  # one of IMPEDANCE_FORCE_INPUTS (decentralized impedance only)
     info_plausibility: InfoPlausibility = field(default_factory=InfoPlausibility)  # ζ_j checks (issue 12)
     own_writer_direct: bool = False  # the own ζ_i is read back from the topic it is written on (no relay)
+    rejoin: RejoinConfig = field(default_factory=RejoinConfig)  # bumpless rejoin after an emergency (issue 12)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -254,6 +256,8 @@ class Controller:
         self._hold_command: TeleopReference | None = None
         self._previous_active = config.mode
         self._observer_paused = False
+        self.rejoin = RejoinRamp(config.rejoin)
+        self._flown = True
 
     #: ControllerConfig fields :meth:`reconfigure` may change in flight (ROS parameters set at run time)
     DYNAMIC_FIELDS = ("gains", "max_thrust", "max_tilt", "info_timeout")
@@ -291,10 +295,14 @@ class Controller:
 
     # ------------------------------------------------------------------------------------------------
     def step(self, now: float, local: LocalEstimate | None, command: TeleopReference | None,
-             ground_truth: GroundTruth | None = None, uav_yaw_local: float | None = None) -> ControlOutput:
+             ground_truth: GroundTruth | None = None, uav_yaw_local: float | None = None,
+             flown: bool = True) -> ControlOutput:
         """One control period at time ``now`` [s]. ``uav_yaw_local`` = own IMU yaw in F0i [rad] (defaults to
-        ``local.uav_yaw``; in ground-truth mode without either, F0i is taken as F0)."""
+        ``local.uav_yaw``; in ground-truth mode without either, F0i is taken as F0). ``flown``: this UAV's PX4 flies
+        the setpoints (False in the swarm's emergency Hold or a bridge's warm-up: the reference then follows the
+        measured configuration and rejoins bumplessly, :mod:`fpr_control.rejoin`)."""
         start = time.perf_counter()
+        self._flown = bool(flown)
         warning = None
         local_valid = local is not None and local.is_finite()
         if local is not None and not local_valid:
@@ -330,6 +338,28 @@ class Controller:
             self._hold_command = TeleopReference.hold(roll, pitch, leg_angles)
         return self._hold_command
 
+    def _measured_leg_angles(self, now: float, local: LocalEstimate) -> np.ndarray:
+        """θ of every leg [rad] as far as this UAV knows: its own estimate, the peers' fresh ζ_j (else its own: a
+        common start keeps the rejoin references of the UAVs alike)."""
+        legs = np.full(self.n, local.leg_angle)
+        ages = self.information.ages(now)
+        for j in range(1, self.n + 1):
+            info = self.information.get(j)
+            if j != self.config.uav_id and info is not None and ages[j - 1] <= self.config.info_timeout:
+                legs[j - 1] = info.leg_angle
+        return legs
+
+    def _rejoin_command(self, command: TeleopReference, roll: float, pitch: float,
+                        leg_angles: np.ndarray | None) -> TeleopReference:
+        """The bumpless-rejoin reference (:mod:`fpr_control.rejoin`) from the measured roll, pitch and leg angles
+        [rad]; the observer forgets its momentum history when the setpoints are flown again (the thrusts it assumed
+        were not applied meanwhile)."""
+        suspended = self.rejoin.suspended
+        out = self.rejoin.apply(self._flown, self.config.period, command, roll, pitch, leg_angles)
+        if suspended and not self.rejoin.suspended:
+            self.observer.reset()
+        return out
+
     def _compute(self, now, local, command, ground_truth, uav_yaw_local, active, fallback, ages, local_ok):
         cfg, n, own = self.config, self.n, self.config.uav_id - 1
         flying = command is not None and command.mode == TELEOP_MODE_FLY
@@ -345,8 +375,9 @@ class Controller:
             jacobian = jacobian_at(self.params, q, check_leg_range=False)
             rotation = jacobian.configuration.rotation  # R_p (A.60)
             roll, pitch, yaw = rotmat_to_euler_zyx(rotation)
-            cmd = self._command(command, roll, pitch, gt.leg_angles.copy())
-            if not flying or not self.reference.initialized:
+            cmd = self._rejoin_command(self._command(command, roll, pitch, gt.leg_angles.copy()), roll, pitch,
+                                       gt.leg_angles)
+            if not flying or not self.reference.initialized or self.rejoin.suspended:
                 self.reference.reset(gt.platform_position, yaw)
             desired = self.reference.step(cmd, cfg.period, roll, pitch, rotation)
             uav_yaw_frame = rotmat_to_euler_zyx(quat_to_rotmat(gt.uav_quats[own]))[2]
@@ -360,6 +391,8 @@ class Controller:
                                          "no valid local state yet")
             roll, pitch = local.platform_roll, local.platform_pitch
             cmd = self._command(command, roll, pitch, np.full(n, local.leg_angle))
+            measured = self._measured_leg_angles(now, local) if self.rejoin.needs_measurement(self._flown) else None
+            cmd = self._rejoin_command(cmd, roll, pitch, measured)
             rotation = quat_to_rotmat(flat_platform_quat(roll, pitch))
             desired = decentralized_reference(cmd, roll, pitch, rotation)
             peers = None
@@ -443,7 +476,8 @@ class Controller:
         if active in ("pd", "pd_compensated"):
             u = pd_acceleration(self.pid.gains, error, nu, desired.nu, desired.nu_dot)
             return control_wrench(terms, u, nu, tau_hat if active == "pd_compensated" else None)
-        u = self.pid.acceleration(error, nu, desired.nu, desired.nu_dot, self.config.period, integrate=flying)
+        u = self.pid.acceleration(error, nu, desired.nu, desired.nu_dot, self.config.period,
+                                  integrate=flying and not self.rejoin.suspended)
         return control_wrench(terms, u, nu)  # (4.27)
 
     def _safe_output(self, local, active, fallback, ages, local_ok, uav_yaw_local, warning=None) -> ControlOutput:

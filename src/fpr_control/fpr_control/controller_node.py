@@ -38,6 +38,7 @@ from fpr_control.information import InfoPlausibility, LocalEstimate, PeerInfo
 from fpr_control.node_utils import LOG_THROTTLE_S, spin_node
 from fpr_control.observers import OBSERVER_KINDS
 from fpr_control.reference import TeleopReference
+from fpr_control.rejoin import RejoinConfig
 from fpr_msgs.msg import (
     AttitudeThrustSetpoint,
     ControllerStatus,
@@ -45,6 +46,7 @@ from fpr_msgs.msg import (
     InformationVector,
     LocalState,
     TeleopCommand,
+    UavStatus,
     WrenchEstimate,
 )
 
@@ -100,6 +102,15 @@ class ControllerNode(Node):
                                set_attribute("imu_timeout"), low=0.001, high=10.0)
         self.teleop_timeout = dyn("teleop_timeout", 1.0, "[s] no TeleopCommand for this long -> zero velocities, "
                                   "hold the rest", set_attribute("teleop_timeout"), low=0.01, high=60.0)
+        self.bridge_status_timeout = dyn(
+            "bridge_status_timeout", 0.5, "[s] the own px4_bridge's status older than this (after one arrived): the "
+            "setpoints are taken as not flown (bumpless rejoin)", set_attribute("bridge_status_timeout"),
+            low=0.01, high=10.0)
+        rejoin_leg_rate = d("rejoin_leg_rate_deg", 8.0, (
+            "[deg/s] after the setpoints were not flown (emergency Hold, a bridge restart), the leg-angle reference "
+            "moves from the measured legs to the command at this rate (fpr_control.rejoin)"), low=0.1, high=360.0)
+        rejoin_attitude_rate = d("rejoin_attitude_rate_deg", 5.0, (
+            "[deg/s] same for the platform roll and pitch reference"), low=0.1, high=360.0)
         model_file = d("model_file", "", "FprParameters YAML (empty: thesis Table B.1 defaults)")
         info_input_topic = d("info_input_topic", "/fpr/info", (
             "topic the peers' zeta_j are read from (the own zeta_i is always published on /fpr/info); set it to "
@@ -226,7 +237,8 @@ class ControllerNode(Node):
             uav_id=int(uav_id), mode=mode, gains=gains_from_dict(gains, int(n)), observer=observer,
             state_source=state_source, period=1.0 / rate, info_timeout=info_timeout, max_thrust=max_thrust,
             max_tilt=math.radians(max_tilt_deg), impedance_force_input=force_input, info_plausibility=plausibility,
-            own_writer_direct=own_writer_direct)
+            own_writer_direct=own_writer_direct,
+            rejoin=RejoinConfig(math.radians(rejoin_leg_rate), math.radians(rejoin_attitude_rate)))
         self.controller = Controller(params, self.config)
         self.n = int(n)
 
@@ -236,6 +248,7 @@ class ControllerNode(Node):
             depth=20, reliability=ReliabilityPolicy.BEST_EFFORT))
         self.create_subscription(TeleopCommand, "/fpr/teleop", self._on_teleop, best_effort)
         self.create_subscription(Imu, "imu", self._on_imu, qos_profile_sensor_data)
+        self.create_subscription(UavStatus, "status", self._on_bridge_status, best_effort)
         if self.controller.uses_ground_truth:
             self.create_subscription(FprState, motion_capture_topic, self._on_ground_truth, best_effort)
         # publishers reliable (REP-2003: any subscriber can connect); the graph's own subscribers are best effort,
@@ -256,6 +269,9 @@ class ControllerNode(Node):
         self._imu_yaw: float | None = None
         self._imu_time = -math.inf
         self._ground_truth: GroundTruth | None = None
+        self._bridge_state: int | None = None  #: the own px4_bridge's UavStatus.state (None: never heard)
+        self._bridge_status_time = -math.inf
+        self._flown_said: bool | None = None
         self.create_timer(self.config.period, self._on_tick)
         self.get_logger().info(
             f"controller uav {uav_id}/{n}: mode {mode}, observer {observer}, state {state_source}, "
@@ -371,6 +387,34 @@ class ControllerNode(Node):
             self.get_logger().info(f"mode {self.config.mode}: every zeta fresh, mode {self.config.mode} active (NC "
                                    f"for {now - previous:.2f} s)", **throttle(self, 1.0))
 
+    def _on_bridge_status(self, msg: UavStatus) -> None:
+        if msg.uav_id == self.config.uav_id:
+            self._bridge_state, self._bridge_status_time = int(msg.state), self._now()
+
+    def _flown(self, now: float) -> bool:
+        """PX4 flies this controller's setpoints: the own bridge reports OFFBOARD (True while no bridge status
+        ever came: a graph without bridges); a status older than bridge_status_timeout is a dead bridge. The
+        change is said once each way (fpr_control.rejoin)."""
+        if self._bridge_state is None:
+            return True
+        fresh = now - self._bridge_status_time <= self.bridge_status_timeout
+        flown = fresh and self._bridge_state == UavStatus.STATE_OFFBOARD
+        if self.controller.rejoin.was_flown and flown != self._flown_said:
+            if not flown:
+                why = (f"bridge state {self._bridge_state}" if fresh else
+                       f"no bridge status for {now - self._bridge_status_time:.2f} s")
+                self.get_logger().info(f"setpoints not flown ({why}): the reference follows the measured "
+                                       "configuration, no integration (bumpless rejoin)")
+            elif self._flown_said is not None:
+                cfg = self.config.rejoin
+                self.get_logger().info(
+                    f"setpoints flown again: rejoining the command at <= {math.degrees(cfg.leg_rate):g} deg/s (legs) "
+                    f"and {math.degrees(cfg.attitude_rate):g} deg/s (roll, pitch)")
+            self._flown_said = flown
+        elif not self.controller.rejoin.was_flown and flown:
+            self._flown_said = True
+        return flown
+
     def _on_tick(self) -> None:
         now = self._now()
         local = self._local if now - self._local_time <= self.local_timeout else None
@@ -390,7 +434,7 @@ class ControllerNode(Node):
             self.get_logger().warning("no TeleopCommand: zero velocities, holding the configuration",
                                       **throttle(self, LOG_THROTTLE_S))
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
-        out = self.controller.step(now, local, command, self._ground_truth, imu_yaw)
+        out = self.controller.step(now, local, command, self._ground_truth, imu_yaw, flown=self._flown(now))
         if out.warning and not self._had_local and not self.controller.uses_ground_truth:
             self.get_logger().info(out.warning + " (start-up)", **throttle(self, LOG_THROTTLE_S))
         elif out.warning:

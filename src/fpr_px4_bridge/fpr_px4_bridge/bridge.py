@@ -8,23 +8,28 @@ One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` 
   the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
 - :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
 
-Stream rate: exactly ONE SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. Time is
-cut into slots of one period on a fixed grid of the clock, slot k = [k T, (k + 1) T) (a tick or a setpoint within
-1e-6 T before a boundary counts as after it: float rounding of the clock); the first tick or setpoint in a new slot
-opens it, so a late timer, a timer ticking at twice the rate or a controller out of phase adds no frame and never
-shifts the slots. (Before, a slot was opened by a tick at least 0.6 T after the previous one: one late tick at
-0.4 T shifted the slots so that every later setpoint of a controller on the grid was held one period — in the
-simulation's lockstep, which waits for each period's setpoint, that stalled the graph: seen under load in CI.)
-In each slot:
+Stream rate: one SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. Time is cut into
+slots of one period on a fixed grid of the clock, slot k = [k T, (k + 1) T) (an instant within 1e-6 T before a
+boundary counts as after it: float rounding of the clock), so a late timer, a timer ticking at twice the rate or a
+controller out of phase never shifts the slots. Each setpoint belongs to the slot of its OWN instant (its header
+stamp, see below; 'now' when the stamp is unusable):
 
-- a new setpoint goes out at once if nothing was sent in the slot yet; otherwise it is held and sent by the tick
-  that opens the next slot, as that slot's frame: a new setpoint leaves within one period (the latest one wins);
-- a slot that ends with no frame (no new setpoint arrived in it) gets the latest setpoint repeated, sent by the
-  tick that closes it, while that setpoint is younger than ``setpoint_timeout``.
+- a new setpoint goes out at once unless a setpoint of the same slot of its own instant already went out (a
+  controller faster than ``stream_rate``, or jitter across a boundary) and the slot of the clock that just ended
+  carried a frame: that one is held, and either a newer setpoint supersedes it or it fills the next slot of the
+  clock that would otherwise end without a frame (the latest one wins);
+- a slot of the clock that ends with no frame gets the latest setpoint, sent by the tick that closes it (a held
+  one, or a repetition while the setpoint is younger than ``setpoint_timeout``).
 
 So a controller publishing at ``stream_rate`` has each of its setpoints sent once, at once, and nothing else (no
 doubled frames); a slower or stalled one is topped up with repetitions to ``stream_rate``; a faster one is thinned
 to it. (Before issue 13 every new setpoint was sent at once AND again by the tick: twice the configured rate.)
+Slots of the setpoints' own instants, not of their arrival: a setpoint that arrives after the tick of the next
+period (its /clock came late) is not held, and does not make the next one wait either. (Before, a setpoint
+arriving in a clock slot that already had a frame was held and sent by the next tick as that slot's frame, so
+the next setpoint was held in turn: once a single setpoint arrived late, every later one left a period late — in
+the simulation's lockstep, which waits for each period's setpoint before the clock moves on, each period then
+waited for the lockstep watchdog: 331 timed-out periods in a 24 s fault flight.)
 
 Setpoint time: each SET_ATTITUDE_TARGET carries in ``time_boot_ms`` the SETPOINT's own instant (the
 ``AttitudeThrustSetpoint`` header stamp, the controller's control instant) put on PX4's boot clock by the
@@ -83,6 +88,8 @@ __all__ = ["BridgeConfig", "BridgeStatus", "Px4Bridge", "SetpointResult"]
 _VOLTAGE_MAX_AGE = 5.0
 #: [stream periods] a tick or setpoint this close before a slot boundary counts as in the next slot (clock rounding).
 _SLOT_EPSILON = 1e-6
+#: [stream periods] a setpoint instant this close to a slot boundary re-centres the grid on the controller's phase
+_GRID_MARGIN = 0.2
 
 
 @dataclass(frozen=True)
@@ -169,6 +176,8 @@ class BridgeStatus:
     emergency: bool = False  #: in the swarm's emergency response (state EMERGENCY)
     emergency_own: bool = False  #: ... for a cause of this UAV's own (the peers follow it)
     emergency_reason: str = ""
+    ready: bool = False  #: could fly OFFBOARD at once (the swarm rejoins together; UavStatus.ready)
+    emergency_landing: bool = False  #: the emergency response lands (UavStatus.emergency_landing)
 
 
 @dataclass
@@ -177,6 +186,7 @@ class _Setpoint:
     thrust_newton: float
     received: float
     time_boot_ms: int  #: the setpoint's own instant on PX4's boot clock (see the module doc)
+    instant: float  #: [s] the setpoint's own instant on the local clock (its stamp; its arrival if unusable)
 
 
 class Px4Bridge:
@@ -194,6 +204,8 @@ class Px4Bridge:
         self._setpoint_unsent = False  #: the latest setpoint has not been transmitted yet
         self._slot: int | None = None  #: index k of the current stream slot [k T, (k + 1) T)
         self._slot_used = False  #: a SET_ATTITUDE_TARGET was sent in the current slot
+        self._sent_instant: float | None = None  #: [s] own instant of the newest setpoint sent (not repeated)
+        self._grid_offset = 0.0  #: [s] slot k = [offset + k T, offset + (k + 1) T), centred on the controller
         self._last_heartbeat_sent = -math.inf
         self._sent_times: deque[float] = deque()
         self.rejected_setpoints = 0
@@ -250,30 +262,62 @@ class Px4Bridge:
             self._event("warn", "setpoint.refused", reason + " (not forwarded)")
             return SetpointResult(accepted=False, sent=False, reason=reason)
         streaming = self.machine.stream_allowed()
-        self._open_slot(now, stream=False)  # a new slot opened by a setpoint needs no top-up of the closing one
+        instant = self._setpoint_instant(stamp, now)
+        self._centre_grid(instant, now)
+        closing_empty = self._slot is not None and not self._slot_used
+        # a new slot opened by a setpoint: the closing one, if empty, gets this setpoint (below), not a repetition
+        opened = self._open_slot(now, stream=False)
         self._setpoint = _Setpoint(q_enu_flu=q, thrust_newton=float(thrust_newton), received=now,
-                                   time_boot_ms=self.setpoint_time_boot_ms(stamp, now))
+                                   time_boot_ms=self._time_boot_ms(instant, now), instant=instant)
         self._setpoint_unsent = True
+        new_slot = self._sent_instant is None or self._slot_of(instant) != self._slot_of(self._sent_instant)
         sent = False
-        if streaming and not self._slot_used:
-            sent = self._transmit(now)  # else held: the tick opening the next slot sends it (module doc)
+        if streaming and (new_slot or (opened and closing_empty)):
+            sent = self._transmit(now)  # else held: superseded, or the frame of a slot that would have none
         return SetpointResult(accepted=True, sent=sent)
 
-    def setpoint_time_boot_ms(self, stamp: float, now: float) -> int:
-        """``time_boot_ms`` of a setpoint stamped ``stamp`` [s, local clock] submitted at ``now`` (module doc)."""
+    def _slot_of(self, instant: float) -> int:
+        """Stream slot index k of ``instant`` [s]: [offset + k T, offset + (k + 1) T) (module doc)."""
+        return math.floor((instant - self._grid_offset) * self.config.stream_rate + _SLOT_EPSILON)
+
+    def _centre_grid(self, instant: float, now: float) -> None:
+        """Put the slot boundaries halfway between the controller's instants (module doc): on the first setpoint,
+        and whenever one comes within ``_GRID_MARGIN`` periods of a boundary (a controller (re)started with
+        another phase). The current slot of the clock carries over to the moved grid."""
+        rate = self.config.stream_rate
+        position = ((instant - self._grid_offset) * rate) % 1.0
+        if self._sent_instant is not None and _GRID_MARGIN <= position <= 1.0 - _GRID_MARGIN:
+            return
+        period = 1.0 / rate
+        self._grid_offset = math.fmod(instant, period) - 0.5 * period
+        if self._slot is not None:
+            self._slot = self._slot_of(now)
+
+    def _setpoint_instant(self, stamp: float, now: float) -> float:
+        """A setpoint's own instant [s, local clock]: its ``stamp``, or ``now`` when the stamp is zero (none), not
+        finite or more than ``setpoint_timeout`` away from ``now`` (another clock: counted and said)."""
         try:
             stamp = float(stamp)
         except (TypeError, ValueError):
             stamp = math.nan
-        usable = math.isfinite(stamp) and stamp > 0.0 and abs(now - stamp) <= self.config.setpoint_timeout
-        if not usable and stamp != 0.0:
+        if math.isfinite(stamp) and stamp > 0.0 and abs(now - stamp) <= self.config.setpoint_timeout:
+            return stamp
+        if stamp != 0.0:
             self.stamp_fallbacks += 1
             self._event("warn", "setpoint.stamp", f"setpoint stamp {stamp} s unusable at {now:.3f} s "
                         "(not finite, or another clock): SET_ATTITUDE_TARGET stamped with 'now'")
-        boot = self.telemetry.mapper.to_boot(stamp if usable else now)
+        return now
+
+    def _time_boot_ms(self, instant: float, now: float) -> int:
+        """``time_boot_ms`` of a local-clock ``instant`` [s] submitted at ``now`` (module doc)."""
+        boot = self.telemetry.mapper.to_boot(instant)
         if boot is None or boot < 0.0:
             boot = now - self.boot_time  # no time sync yet: the bridge's own clock since its start
         return int(round(max(0.0, boot) * 1000.0)) & 0xFFFFFFFF
+
+    def setpoint_time_boot_ms(self, stamp: float, now: float) -> int:
+        """``time_boot_ms`` of a setpoint stamped ``stamp`` [s, local clock] submitted at ``now`` (module doc)."""
+        return self._time_boot_ms(self._setpoint_instant(stamp, now), now)
 
     def setpoint_fresh(self, now: float) -> bool:
         sp = self._setpoint
@@ -330,28 +374,30 @@ class Px4Bridge:
         if not self._send_setpoint(now):
             return False
         self._slot_used = True
+        if self._setpoint_unsent and self._setpoint is not None:
+            self._sent_instant = self._setpoint.instant
         self._setpoint_unsent = False
         self.repetitions_sent += int(repetition)
         return True
 
     def _open_slot(self, now: float, stream: bool) -> bool:
-        """Open the grid slot of ``now`` [s] if it is a new one (module doc): first top up the closing slot if it
-        carried no frame (``stream``: the state machine streams and a fresh setpoint exists). True if opened."""
-        slot = math.floor(now * self.config.stream_rate + _SLOT_EPSILON)
+        """Open the clock slot of ``now`` [s] if it is a new one (module doc): first fill the closing slot if it
+        carried no frame (``stream``: the state machine streams and a fresh setpoint exists) with the latest
+        setpoint (a held one, or a repetition). True if opened."""
+        slot = self._slot_of(now)
         if self._slot is not None and slot <= self._slot:
             return False  # same slot: timer jitter, a caller ticking faster than stream_rate, a second setpoint
         if stream and self._slot is not None and not self._slot_used:
-            self._transmit(now)  # the closing slot's frame: a repetition (or a setpoint not sent before)
+            self._transmit(now)  # the closing slot's frame: a held setpoint or a repetition
         self._slot = slot
         self._slot_used = False
         return True
 
     def _stream_slots(self, now: float, stream: bool) -> None:
-        """The tick's part of the stream-rate rule (module doc): at a slot boundary, top up the closing slot, open
-        the next one and send a held setpoint in it. ``stream``: the state machine streams now (a fresh setpoint
+        """The tick's part of the stream-rate rule (module doc): at a clock-slot boundary, fill the closing slot if
+        it has no frame and open the next one. ``stream``: the state machine streams now (a fresh setpoint
         exists). Times [s]."""
-        if self._open_slot(now, stream) and stream and self._setpoint_unsent:
-            self._transmit(now)  # held new setpoint: the new slot's frame
+        self._open_slot(now, stream)
 
     def setpoint_rate(self, now: float) -> float:
         """Measured SET_ATTITUDE_TARGET output rate over the last second [Hz]."""
@@ -456,9 +502,10 @@ class Px4Bridge:
             thrust_refusals=self.thrust_refusals,
             thrust_saturations=self.thrust_saturations,
             emergency=machine.state == BridgeState.EMERGENCY,
-            emergency_own=machine.state == BridgeState.EMERGENCY and machine.emergency is not None
-            and machine.emergency.own,
+            emergency_own=machine.own_emergency,
             emergency_reason=machine.emergency.reason if machine.emergency is not None else "",
+            ready=machine.ready(now, self.setpoint_fresh(now)),
+            emergency_landing=machine.emergency_landing,
         )
 
     @property

@@ -192,6 +192,9 @@ class OffboardStateMachine:
         self._rejoining = False  #: WARMUP after an EMERGENCY (a new verdict sends it back)
         self._last_rejoin: float | None = None  #: [s] the last EMERGENCY -> WARMUP (rejoin_window)
         self.emergency: Verdict | None = None  #: the verdict that holds the EMERGENCY (None outside it)
+        self._verdict: Verdict | None = None  #: the guard's latest verdict (ready())
+        self._join_wait_said = False  #: WARMUP joining a swarm in its emergency: said once
+        self._wait_said = False  #: EMERGENCY, cause clear, waiting for a peer: said once per emergency
 
     # ---- inputs ----------------------------------------------------------------------------------------
     @property
@@ -229,6 +232,7 @@ class OffboardStateMachine:
             self._seen_offboard = False
             self._seen_land = False
             self._rejoining = False
+            self._join_wait_said = self._wait_said = False
             if state != BridgeState.EMERGENCY:
                 self.emergency = None
             if state == BridgeState.IDLE:
@@ -335,6 +339,7 @@ class OffboardStateMachine:
         """Advance at time ``now``; ``setpoint_fresh``: a valid setpoint younger than setpoint_timeout exists;
         ``verdict``: the swarm guard's (None: no guard, the FAILSAFE behaviour of the module doc)."""
         decision = Decision(stream=False)
+        self._verdict = verdict
         connected = self.connected(now)
         if connected != self._was_connected:
             if connected:
@@ -357,24 +362,39 @@ class OffboardStateMachine:
             if self._rejoining and verdict is not None and verdict.emergency:
                 self._enter_emergency(now, verdict, ", again while rejoining")
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
+            elif verdict is not None and verdict.peer_landing and self.armed:
+                # joining a swarm that lands in its emergency response: land with it
+                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing), " while joining")
+                self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif self.custom_mode_seen and not self.armed and connected:
                 self._enter(BridgeState.IDLE, "warn", "PX4 disarmed during warm-up")
             elif offboard and self._stream_since is not None:
                 self._enter(BridgeState.OFFBOARD, "info", "PX4 reports OFFBOARD")
             elif (self.mode == TeleopMode.FLY and setpoint_fresh and self._stream_since is not None
                   and now - self._stream_since >= self.config.offboard_warmup):
-                if self.offboard_requested_at is None:
-                    self.offboard_requested_at = now
-                # OFFBOARD after arming (PX4's examples: before; PX4 accepts both): a refused ARM never leaves PX4
-                # disarmed in OFFBOARD, and the controller gets the thrust only once armed (module doc, "Order")
-                if not self._request(SET_OFFBOARD, now, decision):
-                    self._enter(BridgeState.FAILSAFE, "error",
-                                f"PX4 did not enter OFFBOARD after {self.config.command_max_attempts} requests")
+                if not self._rejoining and verdict is not None and verdict.swarm_emergency:
+                    # joining a flying swarm in its emergency response (a restarted bridge): OFFBOARD together
+                    # with the others when they rejoin, not alone now (swarm_guard module doc, "Together")
+                    if not self._join_wait_said:
+                        self._join_wait_said = True
+                        self._event("warn", "warmup.join_wait", f"warm-up done, not requesting OFFBOARD: "
+                                    f"{verdict.swarm_emergency}; rejoining with the swarm")
+                else:
+                    if self.offboard_requested_at is None:
+                        self.offboard_requested_at = now
+                    # OFFBOARD after arming (PX4's examples: before; PX4 accepts both): a refused ARM never leaves
+                    # PX4 disarmed in OFFBOARD, and the controller gets the thrust only once armed (module doc)
+                    if not self._request(SET_OFFBOARD, now, decision):
+                        self._enter(BridgeState.FAILSAFE, "error", f"PX4 did not enter OFFBOARD after "
+                                    f"{self.config.command_max_attempts} requests")
         elif state == BridgeState.OFFBOARD:
             if connected and not self.armed:
                 self._enter(BridgeState.FAILSAFE, "error", "PX4 disarmed in OFFBOARD")
             elif verdict is not None and verdict.emergency:
                 self._enter_emergency(now, verdict)
+                self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
+            elif verdict is not None and verdict.peer_landing:
+                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing))
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif not setpoint_fresh:
                 self._enter(BridgeState.FAILSAFE, "error",
@@ -433,17 +453,27 @@ class OffboardStateMachine:
             self._emergency_landing = True
             self._event("warn", "emergency.px4_land", f"emergency: PX4 is landing on its own "
                         f"({self.px4_mode.name}, its failsafe): landing with it")
+        if not self._emergency_landing and verdict is not None and verdict.peer_landing:
+            self._emergency_landing = True
+            self._event("error", "emergency.follow_land", f"emergency: {verdict.peer_landing}: AUTO.LAND with it "
+                        f"now (after {elapsed:.1f} s of Hold)")
+        waiting = verdict.waiting if verdict is not None else ""
         if not self._emergency_landing:
-            if active and elapsed >= cfg.emergency_hold_time:
+            if (active or waiting) and elapsed >= cfg.emergency_hold_time:
                 self._emergency_landing = True
-                self._event("error", "emergency.land", f"emergency: {verdict.reason} still after {elapsed:.1f} s "
+                why = verdict.reason if active else f"cause clear but {waiting}"
+                self._event("error", "emergency.land", f"emergency: {why} still after {elapsed:.1f} s "
                             f"(emergency_hold_time {cfg.emergency_hold_time:g} s): AUTO.LAND")
             elif not active:
                 if self._clear_since is None:
                     self._clear_since = now
                     self._event("info", "emergency.clear", f"emergency: cause clear (was: {held.reason}); "
-                                f"rejoining if it stays clear {cfg.rejoin_delay:g} s")
-                if now - self._clear_since >= cfg.rejoin_delay and self.mode == TeleopMode.FLY and setpoint_fresh:
+                                f"rejoining if it stays clear {cfg.rejoin_delay:g} s and every UAV is ready")
+                if waiting and now - self._clear_since >= cfg.rejoin_delay and not self._wait_said:
+                    self._wait_said = True
+                    self._event("info", "emergency.wait", f"emergency: cause clear, {waiting}: rejoining together")
+                if now - self._clear_since >= cfg.rejoin_delay and self.mode == TeleopMode.FLY and setpoint_fresh \
+                        and not waiting:
                     self._enter(BridgeState.WARMUP, "warn", f"emergency over after {elapsed:.1f} s (was: "
                                 f"{held.reason}): rejoining, OFFBOARD once the stream has run "
                                 f"{cfg.offboard_warmup:g} s")
@@ -477,6 +507,39 @@ class OffboardStateMachine:
                             "waiting for the operator (FLY takes over, LAND lands, KILL disarms)")
         elif not self.armed:
             self._armed_idle_reported = False
+
+    @property
+    def own_emergency(self) -> bool:
+        """In EMERGENCY for a cause of this UAV's own that still holds (latched, landing, or the guard's latest
+        verdict): UavStatus.emergency_own, which the peers follow. Once the own cause clears the peers stop
+        following, so that everybody is ready to rejoin together."""
+        held = self.emergency
+        if self._state != BridgeState.EMERGENCY or held is None or not held.own:
+            return False
+        if held.latched or self._emergency_landing:
+            return True
+        verdict = self._verdict
+        return verdict is None or (verdict.emergency and verdict.own)
+
+    @property
+    def emergency_landing(self) -> bool:
+        """The emergency response lands (AUTO.LAND commanded or PX4 landing on its own): UavStatus.emergency_landing,
+        said at once so that the peers land with it (PX4's mode in the HEARTBEAT lags by up to its period)."""
+        return self._state == BridgeState.EMERGENCY and self._emergency_landing
+
+    def ready(self, now: float, setpoint_fresh: bool) -> bool:
+        """UavStatus.ready: this UAV could fly OFFBOARD at once (armed, a fresh stream warmed up for
+        ``offboard_warmup``, no cause of its own; in WARMUP, OFFBOARD or an EMERGENCY that is not landing): the swarm
+        rejoins together (swarm_guard module doc, "Together")."""
+        if self._state not in (BridgeState.WARMUP, BridgeState.OFFBOARD, BridgeState.EMERGENCY):
+            return False
+        if not (self.armed and setpoint_fresh and self._stream_since is not None
+                and now - self._stream_since >= self.config.offboard_warmup):
+            return False
+        if self._state == BridgeState.EMERGENCY:
+            verdict = self._verdict
+            return not self._emergency_landing and not (verdict is not None and verdict.emergency and verdict.own)
+        return True
 
     def stream_allowed(self) -> bool:
         """True when the current state streams setpoints (freshness aside)."""

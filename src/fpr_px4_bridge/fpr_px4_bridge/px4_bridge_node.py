@@ -90,7 +90,7 @@ _PARAMETERS = {
                              "calls receive_pending() (fpr_experiments' deterministic in-process runner)"),
     "n": Param(3, "number of UAVs of the robot: the swarm guard watches the peers' status uav<j>/status, j != uav_id",
                low=1, high=64),
-    "swarm_guard": (False, "the swarm's emergency response (README 'Emergency response'): on a fault of this UAV or "
+    "swarm_guard": (True, "the swarm's emergency response (README 'Emergency response'): on a fault of this UAV or "
                           "a peer, PX4 Hold, then AUTO.LAND after emergency_hold_time, or rejoin once clear; false: "
                           "stale setpoints only stop the stream (PX4's offboard-loss failsafe acts alone)"),
     "emergency_hold_time": Param(5.0, "[s] the emergency's Hold before AUTO.LAND: set PX4's COM_FAIL_ACT_T to the "
@@ -279,7 +279,7 @@ class Px4BridgeNode(Node):
     def _on_peer_status(self, msg: UavStatus) -> None:
         with self._lock:
             self.bridge.guard.on_peer_status(msg.uav_id, msg.state, msg.emergency_own, msg.emergency_reason,
-                                             self._now())
+                                             self._now(), msg.mode_name, msg.ready, msg.emergency_landing)
 
     def _on_tick(self) -> None:
         with self._lock:
@@ -307,6 +307,7 @@ class Px4BridgeNode(Node):
         msg.rx_garbage = min(s.rx_garbage, 0xFFFFFFFF)
         msg.rejected_setpoints = min(s.rejected_setpoints, 0xFFFFFFFF)
         msg.emergency, msg.emergency_own, msg.emergency_reason = s.emergency, s.emergency_own, s.emergency_reason
+        msg.ready, msg.emergency_landing = s.ready, s.emergency_landing
         self.status_pub.publish(msg)
         self._publish_diagnostics(msg)
 

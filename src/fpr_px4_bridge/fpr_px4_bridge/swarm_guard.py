@@ -26,18 +26,31 @@ PEER (another UAV is lost; this one follows):
 
 A peer counts only once it has been heard from (a graph still starting has no peers yet). The guard only
 reports; :meth:`SwarmGuard.evaluate` returns the present :class:`Verdict`.
+
+Together (the structure holds only if the UAVs change their law together; fault matrix, bridge restarted after
+2 s): a peer landing in its emergency response (its PX4 in AUTO.LAND) makes every UAV in the emergency land at
+once (``Verdict.peer_landing``: one UAV holding while two landed tilted the platform to 50°); a UAV rejoins only
+when every peer with a fresh status is ready to fly OFFBOARD or flies it (``Verdict.waiting``, from
+UavStatus.ready: a restarted bridge warms its stream up first; two UAVs flying the law 0.5 s before the third
+pulled the legs up at 33°/s and lost an estimator's track), and a UAV joining the flying swarm (a restarted
+bridge's WARMUP) waits while a peer is in the emergency response (``Verdict.swarm_emergency``), so the UAVs
+switch to OFFBOARD within a status period of each other.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 __all__ = ["Cause", "PeerState", "SwarmGuard", "SwarmGuardConfig", "Verdict"]
 
 #: UavStatus.STATE_* values a peer reports when it is lost for the swarm
 _PEER_LOST_STATES = {0: "DISCONNECTED (its PX4 is silent)", 6: "KILLED", 7: "FAILSAFE"}
+#: UavStatus.STATE_* values in which a peer's PX4 in AUTO.LAND means the swarm lands (FAILSAFE, EMERGENCY)
+_PEER_LANDING_STATES = (7, 8)
+_STATE_OFFBOARD = 4
+_STATE_EMERGENCY = 8
 
 
 class Cause(Enum):
@@ -79,6 +92,12 @@ class Verdict:
     cause: Cause
     reason: str = ""     #: one line, for the log and UavStatus.emergency_reason
     latched: bool = False  #: no rejoin (envelope): the swarm lands
+    #: a peer lands in the emergency response (its PX4 in AUTO.LAND): land now with it, whatever the hold time
+    peer_landing: str = ""
+    #: rejoin together: a peer is not ready to fly OFFBOARD yet (e.g. its bridge restarts): wait for it
+    waiting: str = ""
+    #: a peer is in the emergency response: a UAV joining the flying swarm (WARMUP) waits for it
+    swarm_emergency: str = ""
 
     @property
     def emergency(self) -> bool:
@@ -96,6 +115,9 @@ class PeerState:
     state: int = 1
     emergency_own: bool = False
     reason: str = ""
+    mode_name: str = ""  #: its PX4's mode, as its bridge reports it ("AUTO.LAND", ...)
+    ready: bool = False  #: it could fly OFFBOARD at once (UavStatus.ready)
+    emergency_landing: bool = False  #: its emergency response lands (UavStatus.emergency_landing)
 
 
 class SwarmGuard:
@@ -119,11 +141,13 @@ class SwarmGuard:
             return None
         return self.peers.setdefault(int(uav_id), PeerState())
 
-    def on_peer_status(self, uav_id: int, state: int, emergency_own: bool, reason: str, now: float) -> None:
+    def on_peer_status(self, uav_id: int, state: int, emergency_own: bool, reason: str, now: float,
+                       mode_name: str = "", ready: bool = False, emergency_landing: bool = False) -> None:
         peer = self._peer(uav_id)
         if peer is not None:
             peer.status_time, peer.state, peer.emergency_own, peer.reason = now, int(state), bool(emergency_own), \
                 str(reason)
+            peer.mode_name, peer.ready, peer.emergency_landing = str(mode_name), bool(ready), bool(emergency_landing)
 
     def on_info(self, uav_id: int, now: float) -> None:
         """A ζ from ``uav_id`` (valid or not: it proves the peer's controller alive)."""
@@ -170,7 +194,28 @@ class SwarmGuard:
 
     def evaluate(self, now: float, setpoints_fresh: bool, flying: bool) -> Verdict:
         """The verdict at ``now``; ``setpoints_fresh``: the own controller's setpoints are fresh; ``flying``:
-        this UAV is in OFFBOARD or in the emergency response (nothing is judged on the ground or before FLY)."""
+        this UAV is in OFFBOARD or in the emergency response (nothing is judged on the ground or before FLY).
+        With fresh peer statuses the verdict also says (module doc, "Together"): ``peer_landing`` a peer already
+        lands in its emergency response; ``waiting`` a peer is not ready to fly
+        OFFBOARD; ``swarm_emergency`` a peer is in the emergency response."""
+        verdict = self._evaluate(now, setpoints_fresh, flying)
+        if not self.config.enabled:
+            return verdict
+        landing, waiting, emergency = "", "", ""
+        for uav_id in sorted(self.peers):
+            peer = self.peers[uav_id]
+            if peer.status_time is None or now - peer.status_time > self.config.peer_status_deadline:
+                continue  # a stale peer is judged by _evaluate's causes
+            if not landing and (peer.emergency_landing or (peer.mode_name == "AUTO.LAND"
+                                                           and peer.state in _PEER_LANDING_STATES)):
+                landing = f"uav{uav_id} lands in the emergency response"
+            if not waiting and not peer.ready and peer.state != _STATE_OFFBOARD:
+                waiting = f"uav{uav_id} not ready to rejoin (state {peer.state})"
+            if not emergency and peer.state == _STATE_EMERGENCY:
+                emergency = f"uav{uav_id} in the emergency response"
+        return replace(verdict, peer_landing=landing, waiting=waiting, swarm_emergency=emergency)
+
+    def _evaluate(self, now: float, setpoints_fresh: bool, flying: bool) -> Verdict:
         cfg = self.config
         if not cfg.enabled:
             return Verdict(Cause.NONE)

@@ -60,11 +60,12 @@ class Rig:
         self.bridge.tick(now)
         self._read(now, self._sent() - before)
 
-    def submit(self, now: float, k: int) -> None:
+    def submit(self, now: float, k: int, stamp: float | None = None) -> None:
+        """Setpoint k submitted at ``now``, stamped ``stamp`` (default: ``now``)."""
         thrust = 5.0 + 0.01 * k  # every setpoint its own thrust, to find it on the wire
         self.submitted[round(self.bridge.normalized_thrust(thrust, now), 6)] = now
         before = self._sent()
-        assert self.bridge.submit_setpoint(Q_LEVEL, thrust, 1, now, stamp=now).accepted
+        assert self.bridge.submit_setpoint(Q_LEVEL, thrust, 1, now, stamp=now if stamp is None else stamp).accepted
         self._read(now, self._sent() - before)
 
     def run(self, events) -> None:
@@ -128,13 +129,13 @@ def test_controller_at_the_stream_rate_each_setpoint_once_at_once(rig, phase, or
 
 
 @pytest.mark.parametrize("order", [-1, 1])
-@pytest.mark.parametrize("lateness", [0.0045, 0.008, 0.009, 0.015])
+@pytest.mark.parametrize("lateness", [0.0045, 0.008, 0.009])
 def test_one_late_tick_with_its_controller_does_not_hold_later_setpoints(rig, lateness, order):
-    """Simulation time, a loaded machine (seen in CI): ONE tick and the controller's setpoint of the same period
-    both run late (their /clock came late), every other one on the grid k T. Each setpoint must still leave at
-    its submission: the simulation's lockstep waits for each period's setpoint, so one held for a period stalls
-    the graph. (The former slot rule, a new slot only 0.6 T after the tick that opened the current one, held every
-    later setpoint after a tick late by more than 0.4 T.)"""
+    """A loaded machine on the wall clock (seen in CI): ONE tick and the controller's setpoint of the same period
+    both run late (the setpoint stamped when it ran), every other one on the grid k T. Each setpoint must still
+    leave at its submission. (The former slot rule, a new slot only 0.6 T after the tick that opened the current
+    one, held every later setpoint after a tick late by more than 0.4 T.) Later than 0.5 T, the late setpoint and
+    the next one are two setpoints within one period: thinned, as from a faster controller."""
     r = rig()
     duration, late_k = 1.0, 12
     n = int(round(duration / T))
@@ -144,6 +145,34 @@ def test_one_late_tick_with_its_controller_does_not_hold_later_setpoints(rig, la
     r.run(_ticks(duration, late=late) + submits)
     assert max(r.first_frame_delays()) == 0.0 and len(r.first_frame_delays()) == n
     assert len(r.times()) == n and r.bridge.repetitions_sent == 0
+
+
+@pytest.mark.parametrize("order", [-1, 1])
+@pytest.mark.parametrize("lateness", [0.0045, 0.01, 0.015, 0.019, 0.025, 0.035])
+def test_simulation_time_a_setpoint_arriving_late_never_holds_the_next_ones(rig, lateness, order):
+    """Simulation time (the lockstep): the controller stamps each setpoint with the /clock it computed on, k T;
+    one setpoint reaches the bridge late, after the bridge's clock moved on by ``lateness`` (up to beyond the
+    next period's tick). It and every later setpoint leave at their submission: the simulation's lockstep waits
+    for each period's setpoint before the clock moves on, so one held setpoint stalls the graph until the lockstep
+    watchdog, and (before the slots followed the setpoints' own instants) every later one was held in turn: the
+    tick that sent the held setpoint filled the next slot, so the next setpoint was held, and so on (a 24 s fault
+    flight: 331 periods waited for the watchdog)."""
+    r = rig()
+    duration, late_k = 1.0, 12
+    n = int(round(duration / T))
+    events = _ticks(duration)
+    for k in range(n):
+        now = round(k * T + (lateness if k == late_k else 0.0), 9)
+        events.append((now, order, "submit_stamped", k))
+    for now, _, kind, k in sorted(events):
+        if kind == "tick":
+            r.tick(now)
+        else:
+            r.submit(now, k, stamp=k * T)
+    delays = r.first_frame_delays()
+    assert len(delays) == n and max(delays) == 0.0
+    assert r.doubled() == r.bridge.repetitions_sent
+    assert r.bridge.repetitions_sent <= 1  # the period whose setpoint was late may be topped up
 
 
 @pytest.mark.parametrize("phase", [0.0, 0.001, 0.01, 0.019])
@@ -194,15 +223,16 @@ def test_faster_controller_is_thinned_to_the_stream_rate_and_the_newest_setpoint
 
 
 def test_a_faster_tick_caller_does_not_speed_the_stream_up(rig):
-    """Ticks at 100 Hz: one setpoint, then repetitions at exactly 50 Hz until setpoint_timeout. The first
-    repetition closes the first slot without a new setpoint, [T, 2T): at 2T."""
+    """Ticks at 100 Hz: one setpoint, then repetitions at exactly 50 Hz until setpoint_timeout. The slots are
+    centred on the setpoint's instant 0, [-T/2, T/2), [T/2, 3T/2), ...: the first repetition closes the first slot
+    without a new setpoint, at 3T/2."""
     r = rig(setpoint_timeout=1.0)
     r.submit(0.0, 0)
     r.run(_ticks(0.9, period=T / 2))
     times = r.times()
-    assert times[0] == 0.0 and times[1] == pytest.approx(2 * T)
+    assert times[0] == 0.0 and times[1] == pytest.approx(1.5 * T)
     np.testing.assert_allclose(np.diff(times[1:]), T, atol=1e-9)
-    assert len(times) == 44 and r.bridge.repetitions_sent == 43
+    assert len(times) == 45 and r.bridge.repetitions_sent == 44  # 0, then 1.5 T, 2.5 T, ... 0.89 s
 
 
 def test_stalled_controller_repetitions_at_the_rate_then_stop_after_setpoint_timeout(rig):

@@ -1,6 +1,7 @@
 """Swarm guard and the EMERGENCY state (issue 12), explicit time, no I/O."""
 
 import math
+from dataclasses import replace
 
 import pytest
 from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, OffboardStateMachine, TeleopMode
@@ -61,7 +62,39 @@ def test_a_peer_own_emergency_is_followed_but_a_peer_following_is_not_echoed():
     assert verdict.cause is Cause.PEER and not verdict.own and "uav2" in verdict.reason
     guard.on_peer_status(2, 8, False, "following uav3", 0.2)  # uav2 only follows: no echo back
     own_controller_fine(guard, 0.2)
-    assert guard.evaluate(0.25, True, True) == NONE
+    verdict = guard.evaluate(0.25, True, True)
+    assert verdict.cause is Cause.NONE
+    # ... but it is in the emergency response and not ready: a rejoin waits for it, a joining UAV too
+    assert "uav2" in verdict.waiting and "uav2" in verdict.swarm_emergency and not verdict.peer_landing
+    guard.on_peer_status(2, 8, False, "following uav3", 0.3, mode_name="AUTO.LOITER", ready=True)
+    verdict = guard.evaluate(0.35, True, True)
+    assert verdict.waiting == "" and "uav2" in verdict.swarm_emergency
+
+
+def test_a_peer_landing_in_its_emergency_is_said_to_every_verdict():
+    """Everybody lands together (bridge restarted, seed 0: two UAVs landing while the third held, 50° tilt)."""
+    guard = healthy_guard()
+    guard.on_peer_status(3, 8, True, "own controller silent, again after a rejoin", 0.1, mode_name="AUTO.LAND")
+    verdict = guard.evaluate(0.15, True, True)
+    assert verdict.emergency and verdict.peer_landing == "uav3 lands in the emergency response"
+    # the operator's LAND (state LANDING) is not an emergency landing: every bridge gets LAND from the teleop
+    guard = healthy_guard()
+    guard.on_peer_status(3, 5, False, "", 0.1, mode_name="AUTO.LAND")
+    assert guard.evaluate(0.15, True, True).peer_landing == ""
+    # a stale status says nothing (the stale peer is a cause of its own)
+    guard = healthy_guard()
+    guard.on_peer_status(3, 8, True, "x", 0.1, mode_name="AUTO.LAND")
+    assert guard.evaluate(0.1 + guard.config.peer_status_deadline + 0.01, True, True).peer_landing == ""
+
+
+def test_rejoin_waits_for_peers_that_are_not_ready_and_flying_peers_count_as_ready():
+    guard = healthy_guard()
+    guard.on_peer_status(2, 3, False, "", 0.1, mode_name="AUTO.LOITER", ready=False)  # a restarted bridge warming up
+    guard.on_peer_status(3, 4, False, "", 0.1, mode_name="OFFBOARD", ready=False)
+    verdict = guard.evaluate(0.15, True, True)
+    assert verdict.cause is Cause.NONE and verdict.waiting == "uav2 not ready to rejoin (state 3)"
+    guard.on_peer_status(2, 3, False, "", 0.2, mode_name="AUTO.LOITER", ready=True)
+    assert guard.evaluate(0.25, True, True).waiting == ""
 
 
 @pytest.mark.parametrize("state, word", [(0, "DISCONNECTED"), (6, "KILLED"), (7, "FAILSAFE")])
@@ -121,7 +154,7 @@ def test_envelope_climb_rate_tilt_and_height_latch_until_disarmed():
     verdict = guard.evaluate(1.0 + cfg.envelope_time, True, True)
     assert verdict.cause is Cause.ENVELOPE and verdict.latched and "climbing" in verdict.reason
     guard.on_local_position(1.7, 0.0, 5.0, armed=True, landed=False, now=2.0)  # climb over: still latched
-    assert guard.evaluate(2.0, True, True) is verdict
+    assert guard.evaluate(2.0, True, True) == verdict
     guard.reset_latch()
     assert guard.evaluate(2.1, True, True) == NONE
     guard.on_local_position(2.0, 0.0, 70.0, armed=True, landed=False, now=3.0)  # attitude failure
@@ -277,3 +310,86 @@ def test_without_a_guard_the_former_failsafe_stays():
     m = flying_machine()
     m.step(1.0, False)  # no verdict: no guard
     assert m.state == BridgeState.FAILSAFE
+
+
+# ---- together: land together, rejoin together (fault matrix, bridge restarted after 2 s) ------------------------
+def test_a_peer_landing_in_its_emergency_makes_a_holding_uav_land_at_once():
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    m.step(1.0, False, OWN)  # own fault: Hold, AUTO.LAND only after the 5 s hold
+    m.on_heartbeat(ARMED, HOLD, 1.5)
+    d = m.step(1.5, False, replace(OWN, peer_landing="uav3 lands in the emergency response"))
+    assert "AUTO.LAND" in labels(d) and any("uav3 lands" in e.text for e in d.events)
+    # and a UAV still flying OFFBOARD (a peer that only followed, then landed) joins the landing too
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    d = m.step(1.0, True, replace(NONE, peer_landing="uav2 lands in the emergency response"))
+    assert m.state == BridgeState.EMERGENCY and "AUTO.LAND" in labels(d)
+
+
+def test_an_emergency_rejoins_only_when_every_peer_is_ready_and_lands_if_one_never_is():
+    m = flying_machine(hold_time=5.0)
+    m.step(1.0, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    waiting = replace(NONE, waiting="uav2 not ready to rejoin (state 3)")
+    d = m.step(1.5, True, waiting)  # the cause cleared (the restarted bridge talks), but it is still warming up
+    d = m.step(2.2, True, waiting)
+    assert m.state == BridgeState.EMERGENCY and any("rejoining together" in e.text for e in d.events)
+    assert m.ready(2.2, True)  # this UAV itself is ready: its cause was a peer's, its stream runs
+    d = m.step(2.3, True, NONE)  # uav2 ready: rejoin now (clear for > rejoin_delay)
+    assert m.state == BridgeState.WARMUP
+    # a peer that never gets ready: the hold time ends the wait with a landing, as a cause that persists
+    m = flying_machine(hold_time=5.0)
+    m.step(1.0, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    commands = []
+    for k in range(60, 320):
+        t = k / 50.0
+        m.on_heartbeat(ARMED, HOLD, t)
+        commands += [(t, c) for c in labels(m.step(t, True, waiting))]
+    land = [t for t, c in commands if c == "AUTO.LAND"]
+    assert land and land[0] == pytest.approx(6.0, abs=0.021) and m.state == BridgeState.EMERGENCY
+
+
+def test_a_uav_joining_a_swarm_in_its_emergency_waits_before_offboard_and_is_ready():
+    """A restarted bridge (fresh WARMUP, PX4 armed in Hold): warmed up, it requests OFFBOARD only once no peer is in
+    the emergency response any more, so that the UAVs switch together; meanwhile its status says ready."""
+    m = OffboardStateMachine(OffboardConfig(offboard_warmup=1.0))
+    m.on_heartbeat(ARMED, HOLD, 0.0)
+    m.on_teleop(TeleopMode.FLY, 0.0)
+    in_emergency = replace(NONE, swarm_emergency="uav1 in the emergency response")
+    commands, events = [], []
+    for k in range(0, 100):
+        t = k / 50.0
+        m.on_heartbeat(ARMED, HOLD, t)
+        d = m.step(t, True, in_emergency)
+        commands += labels(d)
+        events += [e.text for e in d.events]
+    assert m.state == BridgeState.WARMUP and "OFFBOARD" not in commands and m.ready(1.98, True)
+    assert sum("not requesting OFFBOARD" in e for e in events) == 1
+    d = m.step(2.0, True, NONE)
+    assert "OFFBOARD" in labels(d)
+
+
+def test_own_emergency_is_reported_only_while_its_cause_holds():
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    m.step(1.0, True, OWN)
+    assert m.own_emergency and not m.ready(1.0, True)
+    m.on_heartbeat(ARMED, HOLD, 1.2)
+    m.step(1.2, True, NONE)  # cleared: the peers stop following, everybody can get ready
+    assert m.state == BridgeState.EMERGENCY and not m.own_emergency and m.ready(1.2, True)
+
+
+def test_a_peer_deciding_to_land_is_followed_before_its_px4_confirms():
+    """UavStatus.emergency_landing: said when the bridge commands AUTO.LAND; PX4's mode in its 2 Hz HEARTBEAT came
+    up to 0.5 s later, and a UAV that landed 0.5 s after the others tilted the platform to 70° (seed 4)."""
+    guard = healthy_guard()
+    guard.on_peer_status(2, 8, True, "again after a rejoin", 0.1, mode_name="OFFBOARD", emergency_landing=True)
+    assert guard.evaluate(0.15, True, True).peer_landing == "uav2 lands in the emergency response"
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    m.step(1.0, True, OWN)
+    assert not m.emergency_landing
+    m.step(1.0 + m.config.emergency_hold_time + 0.01, True, OWN)
+    assert m.emergency_landing

@@ -133,6 +133,7 @@ class Simulation:
         self._served_ms: list[int | None] = [None] * n  # latest setpoint instant when T_{k-1} was passed [ms]
         self._stream_live = [False] * n  # a new setpoint arrived during the previous control period
         self.lockstep_timeouts = 0
+        self.last_timeout = ""  #: the latest timed-out boundary and the UAVs it waited for (one line)
         #: called while the lockstep waits at a boundary, every <= 50 ms, with the wall seconds waited so far (the
         #: simulator node re-publishes /clock: a lost last /clock would otherwise stall every timer on it)
         self.on_lockstep_wait: Callable[[float], None] | None = None
@@ -282,10 +283,11 @@ class Simulation:
                 break
             if remaining <= 0.0:
                 self.lockstep_timeouts += 1
+                names = ", ".join(f"uav{e.uav_id} ({e.mode_name}, last setpoint at "
+                                  f"{'never' if e.setpoint_time_ms is None else f'{e.setpoint_time_ms} ms'})"
+                                  for e in missing)
+                self.last_timeout = f"t = {t:.3f} s: {names}"
                 if self.options.lockstep_on_timeout == "stop":
-                    names = ", ".join(f"uav{e.uav_id} ({e.mode_name}, last setpoint at "
-                                      f"{'never' if e.setpoint_time_ms is None else f'{e.setpoint_time_ms} ms'})"
-                                      for e in missing)
                     raise LockstepStalled(
                         f"lockstep: no setpoint for t = {t:.3f} s from {names} within {self.options.lockstep_timeout:g}"
                         " s wall: a node of the graph is dead or hung (set lockstep_on_timeout continue to fly on)")

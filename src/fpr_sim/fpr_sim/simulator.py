@@ -266,7 +266,7 @@ class SimulatorNode(Node):
         if self.sim.lockstep_timeouts != self._last_timeouts:
             self._last_timeouts = self.sim.lockstep_timeouts
             self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
-                                      "for setpoints", throttle_duration_sec=5.0)
+                                      f"for setpoints (latest {self.sim.last_timeout})", throttle_duration_sec=5.0)
         if self.real_time_factor > 0.0:
             ahead = (t - self._sim_start) / self.real_time_factor - (time.monotonic() - self._wall_start)
             if ahead > 0.0:
