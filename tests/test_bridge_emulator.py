@@ -388,8 +388,12 @@ def test_px4_bridge_node_flies_the_emulated_px4_on_default_ports():
     sim_time = [Parameter("use_sim_time", value=True)]
     try:
         assert sim.ports == [14580, 14581, 14582] and sim.remote_ports == [14540, 14541, 14542]  # 14580+ -> 14540+
+        # swarm guard off: this test is PX4's own offboard-loss failsafe (COM_OF_LOSS_T) against the bridge's FAILSAFE
+        # state; with the guard (the default) a silent controller is an EMERGENCY in which the bridge commands Hold
+        # itself (src/fpr_px4_bridge/test/test_node.py, tests/test_fault_response.py)
         bridge = Px4BridgeNode(context=context, namespace="/fpr/uav1", parameter_overrides=sim_time + [
-            Parameter("uav_id", value=1), Parameter("command_max_attempts", value=20)])  # default connection URL
+            Parameter("uav_id", value=1), Parameter("command_max_attempts", value=20),
+            Parameter("swarm_guard", value=False)])  # default connection URL
         assert bridge.link.local_address == ("127.0.0.1", 14540)
         test_node = rclpy.create_node("bridge_emulator_test", context=context, parameter_overrides=sim_time)
         statuses, imus = [], []

@@ -6,9 +6,8 @@ The flight: the ``hover`` scenario (armed in OFFBOARD at 1.5 m, legs 45°), the 
 (ARM + FLY, climb 2 s at 0.3 m/s to ~2.1 m, hold), mode C, emulated cameras, the graph as on the robot (one
 process per UAV, ground, simulator) except that the victim node runs in a process of its own, so that it can
 die alone (SIGKILL: no clean shutdown, as a crash). Lockstep with ``lockstep_on_timeout: continue`` and a 0.3 s
-watchdog (below the bridges' 0.8 s ``wall_silence_timeout``, so that the wait for a dead stream does not look
-like a dead simulator to the others): a dead stream is waited for once, then the simulation flies on without it
-(PX4's failsafes play out in simulation time).
+watchdog: a dead stream is waited for once, then the simulation flies on without it (PX4's failsafes play out in
+simulation time).
 
 Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simulation time):
 

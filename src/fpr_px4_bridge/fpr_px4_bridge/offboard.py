@@ -364,7 +364,7 @@ class OffboardStateMachine:
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif verdict is not None and verdict.peer_landing and self.armed:
                 # joining a swarm that lands in its emergency response: land with it
-                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing), " while joining")
+                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing, latched=True), " while joining")
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif self.custom_mode_seen and not self.armed and connected:
                 self._enter(BridgeState.IDLE, "warn", "PX4 disarmed during warm-up")
@@ -394,7 +394,7 @@ class OffboardStateMachine:
                 self._enter_emergency(now, verdict)
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif verdict is not None and verdict.peer_landing:
-                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing))
+                self._enter_emergency(now, Verdict(Cause.PEER, verdict.peer_landing, latched=True))
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif not setpoint_fresh:
                 self._enter(BridgeState.FAILSAFE, "error",
@@ -457,23 +457,30 @@ class OffboardStateMachine:
             self._emergency_landing = True
             self._event("error", "emergency.follow_land", f"emergency: {verdict.peer_landing}: AUTO.LAND with it "
                         f"now (after {elapsed:.1f} s of Hold)")
+        if not active and self._clear_since is None:
+            self._clear_since = now
+            self._event("info", "emergency.clear", f"emergency: cause clear (was: {held.reason}); rejoining if it "
+                        f"stays clear {cfg.rejoin_delay:g} s and every UAV is ready")
+        # rejoin together (swarm_guard module doc): every peer ready, and this UAV too (its stream warmed up), so
+        # that each leaves the emergency when the last one is ready and the OFFBOARD requests go out together
         waiting = verdict.waiting if verdict is not None else ""
+        if not waiting and not self.ready(now, setpoint_fresh):
+            waiting = "this UAV's setpoint stream still warming up"
+        waited = now - self._clear_since if self._clear_since is not None else 0.0
         if not self._emergency_landing:
-            if (active or waiting) and elapsed >= cfg.emergency_hold_time:
+            if active and elapsed >= cfg.emergency_hold_time:
                 self._emergency_landing = True
-                why = verdict.reason if active else f"cause clear but {waiting}"
-                self._event("error", "emergency.land", f"emergency: {why} still after {elapsed:.1f} s "
+                self._event("error", "emergency.land", f"emergency: {verdict.reason} still after {elapsed:.1f} s "
+                            f"(emergency_hold_time {cfg.emergency_hold_time:g} s): AUTO.LAND")
+            elif not active and waiting and waited >= cfg.emergency_hold_time:
+                self._emergency_landing = True
+                self._event("error", "emergency.land", f"emergency: cause clear for {waited:.1f} s but {waiting} "
                             f"(emergency_hold_time {cfg.emergency_hold_time:g} s): AUTO.LAND")
             elif not active:
-                if self._clear_since is None:
-                    self._clear_since = now
-                    self._event("info", "emergency.clear", f"emergency: cause clear (was: {held.reason}); "
-                                f"rejoining if it stays clear {cfg.rejoin_delay:g} s and every UAV is ready")
-                if waiting and now - self._clear_since >= cfg.rejoin_delay and not self._wait_said:
+                if waiting and waited >= cfg.rejoin_delay and not self._wait_said:
                     self._wait_said = True
                     self._event("info", "emergency.wait", f"emergency: cause clear, {waiting}: rejoining together")
-                if now - self._clear_since >= cfg.rejoin_delay and self.mode == TeleopMode.FLY and setpoint_fresh \
-                        and not waiting:
+                if waited >= cfg.rejoin_delay and self.mode == TeleopMode.FLY and setpoint_fresh and not waiting:
                     self._enter(BridgeState.WARMUP, "warn", f"emergency over after {elapsed:.1f} s (was: "
                                 f"{held.reason}): rejoining, OFFBOARD once the stream has run "
                                 f"{cfg.offboard_warmup:g} s")

@@ -114,7 +114,7 @@ _PARAMETERS = {
                           low=1.0, high=179.0),
     "envelope_time": Param(0.3, "[s] an envelope excess must last this long (PX4 FD_FAIL_R_TTRI)", low=0.01,
                            high=60.0),
-    "wall_silence_timeout": (0.8, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
+    "wall_silence_timeout": (0.5, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
                                   "simulator) is reported lost even though /clock stopped with it; 0: off. Runs "
                                   "with the receive thread (the deterministic runner owns the timing)"),
 }

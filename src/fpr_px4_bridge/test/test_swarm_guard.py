@@ -348,7 +348,29 @@ def test_an_emergency_rejoins_only_when_every_peer_is_ready_and_lands_if_one_nev
         m.on_heartbeat(ARMED, HOLD, t)
         commands += [(t, c) for c in labels(m.step(t, True, waiting))]
     land = [t for t, c in commands if c == "AUTO.LAND"]
-    assert land and land[0] == pytest.approx(6.0, abs=0.021) and m.state == BridgeState.EMERGENCY
+    # the wait counts from the cause's clearing (t = 1.2): emergency_hold_time later, AUTO.LAND
+    assert land and land[0] == pytest.approx(6.2, abs=0.021) and m.state == BridgeState.EMERGENCY
+
+
+def test_a_uav_whose_own_stream_is_still_warming_up_waits_in_the_emergency():
+    """A restarted controller: the bridge's stream restarts with it, so this UAV is not ready (offboard_warmup)
+    when its cause clears; it leaves the emergency with the others once warmed up, not alone before them."""
+    m = flying_machine()
+    m.on_heartbeat(ARMED, OFFBOARD, 1.0)
+    m.step(1.0, False, OWN)  # controller dead: stream stopped
+    t = 1.0
+    while t < 3.0:  # restarted at 3 s: fresh setpoints again
+        t = round(t + 0.02, 9)
+        m.on_heartbeat(ARMED, HOLD, t)
+        m.step(t, False, OWN)
+    states = []
+    while t < 5.0:
+        t = round(t + 0.02, 9)
+        m.on_heartbeat(ARMED, HOLD, t)
+        m.step(t, True, NONE)
+        states.append((t, m.state))
+    left = [t for t, s in states if s != BridgeState.EMERGENCY]
+    assert left and left[0] >= 3.0 + m.config.offboard_warmup - 1e-9  # not before its own stream warmed up
 
 
 def test_a_uav_joining_a_swarm_in_its_emergency_waits_before_offboard_and_is_ready():

@@ -1098,6 +1098,13 @@ class Px4Emulator:
         except OSError:
             pass
 
+    def keep_alive(self) -> None:
+        """A HEARTBEAT now, outside the streams (simulation only): the simulator sends one every few tenths of a
+        second of WALL time while its lockstep waits for a setpoint, so that the bridges' wall-clock watchdog
+        (which tells a dead simulator from a live one although /clock stopped) never takes a live but waiting
+        simulator for a dead one. A HEARTBEAT carries no time, so it changes nothing else."""
+        self._send_one(MSG_HEARTBEAT, self.time, None)
+
     def send_status(self, voltage: float, remaining: float, current: float) -> None:
         """HEARTBEAT, SYS_STATUS and BATTERY_STATUS now (voltage [V], remaining [0..1], current [A])."""
         self._battery = (voltage, remaining, current)

@@ -214,12 +214,16 @@ class SimulatorNode(Node):
         """While the lockstep waits at a boundary: /clock again (same time) every CLOCK_REPEAT_S of wall time. Every
         node's /clock subscription is best effort (rclpy's TimeSource), so a lost last /clock would leave the
         controllers' timers stopped and the lockstep waiting for their setpoints until its watchdog; a repeated
-        time changes nothing for a node that had it."""
+        time changes nothing for a node that had it. Each emulated PX4 sends a HEARTBEAT with it
+        (Px4Emulator.keep_alive): a waiting simulator is alive, and the bridges' wall watchdog must not say
+        'PX4 lost' (a false peer loss for the swarm guard, seen at a multi-process start)."""
         if waited < self._clock_republished_at + CLOCK_REPEAT_S:
             if waited < self._clock_republished_at:
                 self._clock_republished_at = 0.0  # a new wait
             return
         self._clock_republished_at = waited
+        for emulator in self.sim.emulators:
+            emulator.keep_alive()
         if rclpy.ok(context=self.context):
             self.clock_pub.publish(Clock(clock=_stamp(self.sim.time)))
 

@@ -205,3 +205,52 @@ def test_simulator_node_publishes_tf_and_the_robot_description():
         assert {"platform", "leg1", "uav3/base_link"} <= links and len(links) == 7
     finally:
         rclpy.shutdown()
+
+
+def test_a_waiting_lockstep_keeps_the_mavlink_links_alive():
+    """While the lockstep waits for a setpoint, /clock is repeated every CLOCK_REPEAT_S of wall time and every
+    emulated PX4 sends a HEARTBEAT with it: a live simulator is never silent for the bridges' wall watchdog
+    (wall_silence_timeout 0.5 s), a dead one is (tests/test_fault_response.py)."""
+    import socket
+
+    from fpr_px4_bridge import px4_protocol as p
+
+    mavlink = p.import_mavlink()
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import CLOCK_REPEAT_S, SimulatorNode
+
+        overrides = [Parameter("local_base_port", value=0), Parameter("remote_base_port", value=0)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        bridge = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        bridge.bind(("127.0.0.1", 0))
+        bridge.settimeout(0.5)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+        emulator = sim_node.sim.emulators[0]
+        bridge.sendto(mav.heartbeat_encode(18, 8, 0, 0, 4).pack(mav), emulator.sock.getsockname())
+        emulator.poll(0.0)  # the bridge becomes the link's partner
+        parser = mavlink.MAVLink(None)
+
+        def heartbeats() -> int:
+            count = 0
+            bridge.settimeout(0.05)
+            try:
+                while True:
+                    for m in parser.parse_buffer(bridge.recv(65535)) or []:
+                        count += m.get_type() == "HEARTBEAT"
+            except TimeoutError:
+                return count
+
+        heartbeats()
+        sim_node._on_lockstep_wait(0.05)  # within the first CLOCK_REPEAT_S of a wait: nothing yet
+        assert heartbeats() == 0
+        sim_node._on_lockstep_wait(CLOCK_REPEAT_S + 0.01)
+        assert heartbeats() == 1
+        sim_node._on_lockstep_wait(CLOCK_REPEAT_S + 0.02)  # not again before another CLOCK_REPEAT_S
+        assert heartbeats() == 0
+        sim_node._on_lockstep_wait(2 * CLOCK_REPEAT_S + 0.02)
+        assert heartbeats() == 1
+        bridge.close()
+        sim_node.destroy_node()
+    finally:
+        rclpy.shutdown()
