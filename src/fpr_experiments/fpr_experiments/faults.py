@@ -122,6 +122,11 @@ ALTERNATIVES: dict[str, dict[str, Any]] = {
     "no_guard": {"description": "no swarm response (before issue 12): only the lost UAV's PX4 failsafe acts; the "
                                 "others fall back to NC (4.32) and fly on",
                  "parameters": {"px4_bridge": {"swarm_guard": False}}, "scenario": {}},
+    "stiff_hold": {"description": "swarm guard, PX4's horizontal position hold stiffer than fpr_sim's defaults "
+                                  "(MPC_XY_P 2.0, MPC_XY_VEL_P_ACC 4.0, MPC_XY_VEL_I_ACC 2.0: the legs' horizontal "
+                                  "load is taken up faster in Hold)",
+                   "parameters": {"px4_bridge": {"swarm_guard": True}},
+                   "scenario": {"px4": {"position_control": {"xy_p": 2.0, "xy_vel_p": 4.0, "xy_vel_i": 2.0}}}},
     "land_now": {"description": "swarm guard, AUTO.LAND at once (emergency_hold_time 0, COM_FAIL_ACT_T 0): no "
                                 "chance to rejoin",
                  "parameters": {"px4_bridge": {"swarm_guard": True, "emergency_hold_time": 0.0}},

@@ -18,7 +18,10 @@ OWN (this UAV is the one in trouble; said in its UavStatus so that the peers fol
 PEER (another UAV is lost; this one follows):
 - a peer's UavStatus says it is in an emergency of its OWN (a peer's emergency that is itself only a PEER one is
   not followed: no echo, so the swarm can clear once the root cause clears);
-- a peer's bridge reports FAILSAFE, KILLED or DISCONNECTED (its PX4 silent) while this UAV flies;
+- a peer's bridge reports FAILSAFE, KILLED or DISCONNECTED (its PX4 silent) while this UAV flies (DISCONNECTED only
+  once that bridge had its link up: before, it is still starting — a hover start saw a peer's first status, sent
+  before its first HEARTBEAT, as a lost PX4, and the rejoin that followed made the real fault 10 s later a
+  "repeated" one that landed two UAVs while the third held: 37° of tilt);
 - a peer's UavStatus older than ``peer_status_deadline`` while its ζ still arrives: its bridge died;
 - a peer with neither UavStatus nor ζ for ``peer_silence_deadline``: the peer, or the link to it, is lost. This
   deadline is deliberately longer than the outages the NC fallback (4.32) is there to ride out (thesis §4.3.2;
@@ -49,6 +52,7 @@ __all__ = ["Cause", "PeerState", "SwarmGuard", "SwarmGuardConfig", "Verdict"]
 _PEER_LOST_STATES = {0: "DISCONNECTED (its PX4 is silent)", 6: "KILLED", 7: "FAILSAFE"}
 #: UavStatus.STATE_* values in which a peer's PX4 in AUTO.LAND means the swarm lands (FAILSAFE, EMERGENCY)
 _PEER_LANDING_STATES = (7, 8)
+_STATE_DISCONNECTED = 0
 _STATE_OFFBOARD = 4
 _STATE_EMERGENCY = 8
 
@@ -118,6 +122,7 @@ class PeerState:
     mode_name: str = ""  #: its PX4's mode, as its bridge reports it ("AUTO.LAND", ...)
     ready: bool = False  #: it could fly OFFBOARD at once (UavStatus.ready)
     emergency_landing: bool = False  #: its emergency response lands (UavStatus.emergency_landing)
+    linked: bool = False  #: it has reported its PX4 link up once (before, DISCONNECTED is its start-up)
 
 
 class SwarmGuard:
@@ -148,6 +153,7 @@ class SwarmGuard:
             peer.status_time, peer.state, peer.emergency_own, peer.reason = now, int(state), bool(emergency_own), \
                 str(reason)
             peer.mode_name, peer.ready, peer.emergency_landing = str(mode_name), bool(ready), bool(emergency_landing)
+            peer.linked = peer.linked or int(state) != _STATE_DISCONNECTED
 
     def on_info(self, uav_id: int, now: float) -> None:
         """A ζ from ``uav_id`` (valid or not: it proves the peer's controller alive)."""
@@ -253,7 +259,7 @@ class SwarmGuard:
         if status_age <= cfg.peer_status_deadline:
             if peer.emergency_own:
                 return f"uav{uav_id} in an emergency: {peer.reason or 'no reason given'}"
-            if peer.state in _PEER_LOST_STATES:
+            if peer.state in _PEER_LOST_STATES and (peer.linked or peer.state != _STATE_DISCONNECTED):
                 return f"uav{uav_id}'s bridge reports {_PEER_LOST_STATES[peer.state]}"
             return ""
         if peer.status_time is not None and info_age <= cfg.peer_status_deadline:

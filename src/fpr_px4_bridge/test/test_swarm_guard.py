@@ -415,3 +415,17 @@ def test_a_peer_deciding_to_land_is_followed_before_its_px4_confirms():
     assert not m.emergency_landing
     m.step(1.0 + m.config.emergency_hold_time + 0.01, True, OWN)
     assert m.emergency_landing
+
+
+def test_a_peer_still_starting_is_not_a_lost_peer():
+    """A peer bridge's first statuses say DISCONNECTED until its PX4's first HEARTBEAT: not a lost PX4 (a hover start
+    took it for one, fault matrix seed 4); once its link was up, DISCONNECTED is followed."""
+    guard = SwarmGuard(SwarmGuardConfig(uav_id=1))
+    guard.on_own_controller_status(True, 0.0)
+    guard.on_info(2, 0.0)
+    guard.on_peer_status(2, 0, False, "", 0.0)  # starting: PX4 not heard yet
+    assert guard.evaluate(0.05, True, True).cause is Cause.NONE
+    guard.on_peer_status(2, 3, False, "", 0.1)  # link up (WARMUP)
+    guard.on_peer_status(2, 0, False, "", 0.2)  # then silent: lost
+    guard.on_own_controller_status(True, 0.2)
+    assert "DISCONNECTED" in guard.evaluate(0.25, True, True).reason
