@@ -49,18 +49,23 @@ class SimulatedClock:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node("mavsdk_test_clock", context=self.context)
-        self._now = 0.0
+        self._now, self._fresh = 0.0, False
         self.node.create_subscription(Clock, "/clock", self._on_clock, QoSProfile(depth=1))
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
     def _on_clock(self, msg) -> None:
         self._now = msg.clock.sec + 1e-9 * msg.clock.nanosec
+        self._fresh = True
 
     @property
     def now(self) -> float:
-        """The latest /clock [s] (simulated)."""
-        self.executor.spin_once(timeout_sec=0.0)
+        """The latest /clock [s] (simulated): waits (at most 0.5 s of wall time) for a /clock newer than the last
+        one read, so that a window's start and end are both fresh (the 250 Hz /clock: a few ms)."""
+        self._fresh = False
+        deadline = time.monotonic() + 0.5
+        while not self._fresh and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
         return self._now
 
     def wait_for(self, seconds: float, wall_limit: float) -> None:

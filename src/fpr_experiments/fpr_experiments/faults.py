@@ -117,16 +117,17 @@ def fault_graph(case: FaultCase, scenario_file: str, px4_log_file: str,
 #: overrides per executable and scenario overrides (the emulated PX4s' failsafe, fpr_sim Px4Config)
 ALTERNATIVES: dict[str, dict[str, Any]] = {
     "guard": {"description": "swarm guard (default): every UAV Hold on a fault, AUTO.LAND after 5 s unless it "
-                             "clears (rejoin); the lost UAV's PX4: COM_OF_LOSS_T 0.5 s, Hold COM_FAIL_ACT_T 5 s, Land",
+                             "clears (rejoin); the lost UAV's PX4: COM_OF_LOSS_T 0.5 s, Hold COM_FAIL_ACT_T 5 s, Land; "
+                             "MPC_XY_P 2.0, MPC_XY_VEL_P_ACC 4.0, MPC_XY_VEL_I_ACC 2.0",
               "parameters": {"px4_bridge": {"swarm_guard": True}}, "scenario": {}},
     "no_guard": {"description": "no swarm response (before issue 12): only the lost UAV's PX4 failsafe acts; the "
                                 "others fall back to NC (4.32) and fly on",
                  "parameters": {"px4_bridge": {"swarm_guard": False}}, "scenario": {}},
-    "stiff_hold": {"description": "swarm guard, PX4's horizontal position hold stiffer than fpr_sim's defaults "
-                                  "(MPC_XY_P 2.0, MPC_XY_VEL_P_ACC 4.0, MPC_XY_VEL_I_ACC 2.0: the legs' horizontal "
-                                  "load is taken up faster in Hold)",
-                   "parameters": {"px4_bridge": {"swarm_guard": True}},
-                   "scenario": {"px4": {"position_control": {"xy_p": 2.0, "xy_vel_p": 4.0, "xy_vel_i": 2.0}}}},
+    "soft_hold": {"description": "swarm guard, PX4's horizontal position hold softer than fpr_sim's defaults "
+                                 "(MPC_XY_P 1.8, MPC_XY_VEL_P_ACC 3.0, MPC_XY_VEL_I_ACC 0.4: the defaults before "
+                                 "2026-12-03; the legs' horizontal load is taken up more slowly in Hold)",
+                  "parameters": {"px4_bridge": {"swarm_guard": True}},
+                  "scenario": {"px4": {"position_control": {"xy_p": 1.8, "xy_vel_p": 3.0, "xy_vel_i": 0.4}}}},
     "land_now": {"description": "swarm guard, AUTO.LAND at once (emergency_hold_time 0, COM_FAIL_ACT_T 0): no "
                                 "chance to rejoin",
                  "parameters": {"px4_bridge": {"swarm_guard": True, "emergency_hold_time": 0.0}},

@@ -116,9 +116,10 @@ Modes (PX4 parameters emulated, :class:`~fpr_sim.scenario.Px4Config` field in br
   low-thrust rule fires, e.g. if something else touches first) and disarms COM_DISARM_LAND later. From the
   ``hover`` scenario (1.5 m) all three are disarmed ~3.1 s after NAV_LAND (test_px4_gcs.py);
 - the horizontal position loop of the FPR's PX4s is stiffer than PX4's defaults (Px4Config ``position_control``:
-  MPC_XY_P 1.8, MPC_XY_VEL_P_ACC 3.0, both within PX4's ranges): with the defaults the structure's weight, a
-  negative stiffness on the UAVs' horizontal positions, makes the legs of the ``hover`` scenario oscillate and
-  collapse in Hold within 10 s; with the tuning the platform stays within ~6 cm in altitude for 10 s.
+  MPC_XY_P 2.0, MPC_XY_VEL_P_ACC 4.0, MPC_XY_VEL_I_ACC 2.0, all within PX4's ranges): with the defaults the
+  structure's weight, a negative stiffness on the UAVs' horizontal positions, makes the legs of the ``hover``
+  scenario oscillate and collapse in Hold within 10 s; with the tuning the platform stays within ~6 cm in altitude
+  for 10 s.
 
 Telemetry (simulation time; :meth:`Px4Emulator.due_messages` / :meth:`Px4Emulator.send_messages`), each message
 on its own interval, changeable by SET_MESSAGE_INTERVAL; defaults = PX4's onboard link (mavlink_main.cpp

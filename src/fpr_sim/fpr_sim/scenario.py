@@ -149,12 +149,15 @@ class Px4Config:
     land_detector_time: float = 1.0  #: LNDMC_TRIG_TIME [s] low thrust and no vertical motion -> landed
     land_detector_z_vel: float = 0.5  #: LNDMC_Z_VEL_MAX [m/s] "no vertical motion"
     #: the multicopter position controller (MPC_* parameters, fpr_sim.px4_position_control): PX4's defaults but a
-    #: stiffer horizontal loop, MPC_XY_P 1.8 (PX4 0.95, range 0-2) and MPC_XY_VEL_P_ACC 3.0 (PX4 1.8, range 1.2-5):
-    #: with PX4's defaults the hover scenario (legs 45°, platform above the UAVs) collapses in Hold within 10 s, the
-    #: structure's weight acting on the UAVs' horizontal positions as a negative stiffness larger than the loop's
-    #: (test_px4_gcs.py). The FPR's PX4s are tuned for the attached vehicles, as their attitude gains are.
+    #: stiffer horizontal loop, MPC_XY_P 2.0 (PX4 0.95, range 0-2), MPC_XY_VEL_P_ACC 4.0 (PX4 1.8, range 1.2-5) and
+    #: MPC_XY_VEL_I_ACC 2.0 (PX4 0.4, range 0-60): with PX4's defaults the hover scenario (legs 45°, platform above
+    #: the UAVs) collapses in Hold within 10 s, the structure's weight acting on the UAVs' horizontal positions as a
+    #: negative stiffness larger than the loop's (test_px4_gcs.py); with 1.8 / 3.0 / 0.4 (before) the swarm's
+    #: emergency Hold after a dead bridge still folded the legs to 20-38° of platform tilt, with these 5.6-22°
+    #: (docs/safety.md, alternative soft_hold). The FPR's PX4s are tuned for the attached vehicles, as their
+    #: attitude gains are.
     position_control: PositionControlConfig = field(
-        default_factory=lambda: PositionControlConfig(xy_p=1.8, xy_vel_p=3.0))
+        default_factory=lambda: PositionControlConfig(xy_p=2.0, xy_vel_p=4.0, xy_vel_i=2.0))
     yaw_offsets: list[float] = field(default_factory=lambda: [0.0])  #: F0i yaw offset per UAV [rad]
     # Stream rates [Hz] of PX4's onboard MAVLink link (mavlink_main.cpp, MAVLINK_MODE_ONBOARD); each can be changed
     # at run time by MAV_CMD_SET_MESSAGE_INTERVAL. 0 disables a stream.

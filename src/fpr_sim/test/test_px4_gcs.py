@@ -430,7 +430,7 @@ def test_px4_default_horizontal_gains_let_the_hover_fpr_collapse_in_hold():
     """Why Px4Config.position_control is stiffer than PX4's defaults: with MPC_XY_P 0.95 / MPC_XY_VEL_P_ACC 1.8 the
     weight of the structure (platform above the UAVs, legs at 45°) beats the UAVs' horizontal position loops and
     the legs oscillate and collapse in Hold within 10 s, though every UAV holds its altitude."""
-    scenario = dict(HOVER, px4=dict(HOVER["px4"], position_control={"xy_p": 0.95, "xy_vel_p": 1.8}))
+    scenario = dict(HOVER, px4=dict(HOVER["px4"], position_control={"xy_p": 0.95, "xy_vel_p": 1.8, "xy_vel_i": 0.4}))
     rig = Rig(scenario)
     try:
         sim = rig.sim
