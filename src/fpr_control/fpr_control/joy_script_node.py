@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 
+import rclpy
 import yaml
 from fpr_model.node_parameters import NodeParameters
 from rclpy.node import Node
@@ -36,6 +37,12 @@ class JoyScriptNode(Node):
         self.wait_for_subscribers = bool(d("wait_for_subscribers", True,
             "start the timeline when 'joy' has a subscriber"))
         self.stop_at_end = bool(d("stop_at_end", False, "stop publishing after the last keyframe"))
+        self.exit_at_end = bool(d("exit_at_end", False, (
+            "exit the process exit_delay s after the last keyframe (a timeline that does not loop); false: publish "
+            "the last keyframe until stopped (Ctrl-C)")))
+        self.exit_delay = float(d("exit_delay", 5.0, (
+            "[s] after the last keyframe, the last values still published (the robot finishes its landing), "
+            "before exit_at_end exits"), low=0.0, high=3600.0))
         path = resolve_script(script)
         with open(path, encoding="utf-8") as stream:
             self.timeline = timeline_from_dict(yaml.safe_load(stream))
@@ -43,8 +50,14 @@ class JoyScriptNode(Node):
         self._start: float | None = None
         self._finished = False
         self.create_timer(1.0 / rate, self._on_tick)
+        if self.timeline.loop:
+            ending = "loops until stopped (Ctrl-C)"
+        elif self.exit_at_end:
+            ending = f"exits {self.exit_delay:g} s after its last keyframe"
+        else:
+            ending = "then publishes its last keyframe until stopped (Ctrl-C; -p exit_at_end:=true exits by itself)"
         self.get_logger().info(f"joy_script: {path}, {len(self.timeline.keyframes)} keyframes, "
-                               f"{self.timeline.duration:.1f} s, loop {self.timeline.loop}")
+                               f"{self.timeline.duration:.1f} s, {ending}")
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -57,6 +70,11 @@ class JoyScriptNode(Node):
             self._start = now + self.start_delay
         t = now - self._start
         if t < 0.0 or self._finished:
+            return
+        if self.exit_at_end and not self.timeline.loop and t > self.timeline.duration + self.exit_delay:
+            self._finished = True
+            self.get_logger().info("joy_script: timeline finished, exiting (exit_at_end)")
+            rclpy.shutdown(context=self.context)  # spin() returns: main() ends, the process exits with status 0
             return
         if self.stop_at_end and not self.timeline.loop and t > self.timeline.duration:
             self._finished = True

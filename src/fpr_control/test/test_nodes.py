@@ -261,6 +261,33 @@ def test_joy_script_node_plays_the_timeline(tmp_path):
         graph.close()
 
 
+def test_joy_script_exits_after_its_timeline_with_exit_at_end(tmp_path):
+    """Issue 14: `ros2 run fpr_control joy_script -p exit_at_end:=true` ends by itself exit_delay after its last
+    keyframe, with status 0 and one line saying so (the README's by-hand section relies on it); without the option
+    it says how it is stopped."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "s.yaml"
+    script.write_text("axes_count: 8\nbuttons_count: 11\nkeyframes:\n"
+                      "  - {t: 0.0, axes: {4: 0.25}}\n  - {t: 0.3, buttons: {0: 1}}\n")
+    command = [sys.executable, "-m", "fpr_control.joy_script_node", "--ros-args", "-p", f"script:={script}",
+               "-p", "wait_for_subscribers:=false", "-p", "exit_delay:=0.2"]
+    done = subprocess.run([*command, "-p", "exit_at_end:=true"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "exits 0.2 s after its last keyframe" in done.stderr
+    assert "timeline finished, exiting (exit_at_end)" in done.stderr
+    running = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    try:
+        first_line = running.stderr.readline()
+        assert "until stopped (Ctrl-C; -p exit_at_end:=true exits by itself)" in first_line
+        with pytest.raises(subprocess.TimeoutExpired):
+            running.wait(timeout=1.5)  # 0.3 s of timeline + 0.2 s: still running
+    finally:
+        running.terminate()
+        assert running.wait(timeout=10) == 0
+
+
 def test_controller_node_bounds_teleop_and_refuses_a_second_zeta_publisher():
     """Issue 12: an absurd /fpr/teleop is refused (the last valid command is kept), a slightly-out-of-range one is
     clamped; a second publisher claiming uav_id 2 on /fpr/info is refused after the first one is established."""

@@ -149,6 +149,7 @@ class PoseEstimatorNode(Node):
         rate = float(p["output_rate"])
         if not rate > 0.0:
             raise ValueError(f"output_rate must be positive, got {rate}")
+        self._pre_clock_said = False
         self.create_timer(1.0 / rate, self._on_timer)
 
     def _now(self) -> float:
@@ -169,7 +170,19 @@ class PoseEstimatorNode(Node):
             else:
                 logger.info(line)
 
+    def _before_clock(self) -> bool:
+        """No /clock yet (use_sim_time: the node's time is 0): an input cannot be checked against the node's
+        time, and would be refused as 'in the future'; dropped, said once (a multi-process start, nominal)."""
+        if self._now() > 0.0:
+            return False
+        if not self._pre_clock_said:
+            self._pre_clock_said = True
+            self.get_logger().info("inputs before the first /clock (use_sim_time): dropped until the clock runs")
+        return True
+
     def _on_imu(self, msg: Imu) -> None:
+        if self._before_clock():
+            return
         now = self._now()
         stamp = _stamp_seconds(msg.header.stamp) or now
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
@@ -183,6 +196,8 @@ class PoseEstimatorNode(Node):
         self._log_events()
 
     def _on_marker(self, msg: MarkerDetection) -> None:
+        if self._before_clock():
+            return
         q, t = msg.pose.orientation, msg.pose.position
         capture = _stamp_seconds(msg.header.stamp) or None
         self.core.on_marker(self._now(), np.array([t.x, t.y, t.z]), np.array([q.w, q.x, q.y, q.z]), capture)

@@ -302,7 +302,7 @@ class Px4Bridge:
             stamp = math.nan
         if math.isfinite(stamp) and stamp > 0.0 and abs(now - stamp) <= self.config.setpoint_timeout:
             return stamp
-        if stamp != 0.0:
+        if stamp != 0.0 and now > 0.0:  # now 0: no /clock yet (use_sim_time), every stamp is ahead: nominal
             self.stamp_fallbacks += 1
             self._event("warn", "setpoint.stamp", f"setpoint stamp {stamp} s unusable at {now:.3f} s "
                         "(not finite, or another clock): SET_ATTITUDE_TARGET stamped with 'now'")

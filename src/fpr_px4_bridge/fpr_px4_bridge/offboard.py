@@ -176,6 +176,7 @@ class OffboardStateMachine:
         self.custom_mode = 0
         self.custom_mode_seen = False  # a HEARTBEAT has been received
         self._was_connected = False
+        self.link_was_up = False  #: the PX4 link was up (connected) once: a silence before is a start-up
         self._stream_since: float | None = None
         self._attempts: dict[str, int] = {}
         self._last_sent: dict[str, float] = {}
@@ -343,6 +344,7 @@ class OffboardStateMachine:
         connected = self.connected(now)
         if connected != self._was_connected:
             if connected:
+                self.link_was_up = True
                 self._event("info", "link.up", f"PX4 link up: connected (mode {self.px4_mode.name})")
             elif self._last_heartbeat is not None:
                 self._event("warn", "link.down",

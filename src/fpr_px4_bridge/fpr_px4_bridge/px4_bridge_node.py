@@ -232,6 +232,7 @@ class Px4BridgeNode(Node):
         self._rx_frames_seen = 0
         self._wall_silent_since: float | None = None
         self._pre_clock_silence_said = False
+        self._pre_link_silence_said = False
         if bool(p["receive_thread"]) and self.wall_silence_timeout > 0.0 and \
                 bool(self.get_parameter("use_sim_time").value):
             self.create_timer(0.05, self._on_wall_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -364,6 +365,14 @@ class Px4BridgeNode(Node):
                 self._pre_clock_silence_said = True
                 self.get_logger().info(f"no MAVLink frame for {silence:.1f} s of wall time before the simulation "
                                        "clock started (the simulator is waiting for the graph)")
+            return
+        if not self.bridge.machine.link_was_up:
+            # heard, then silent before the link was up: PX4 / the simulator still starting (a loaded multi-process
+            # start: a few frames, then the simulator's process busy starting for 0.7 s), nominal
+            if not self._pre_link_silence_said:
+                self._pre_link_silence_said = True
+                self.get_logger().info(f"no MAVLink frame for {silence:.1f} s of wall time before the PX4 link "
+                                       "came up (PX4 or the simulator still starting)")
             return
         if self._wall_silent_since is None:
             self._wall_silent_since = self._last_frame_wall

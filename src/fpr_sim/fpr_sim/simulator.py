@@ -66,6 +66,10 @@ def _pose(position, quat_wxyz) -> Pose:
 
 #: [s] wall: while the lockstep waits, /clock is re-published this often (SimulatorNode._on_lockstep_wait)
 CLOCK_REPEAT_S = 0.25
+#: [s of wall time] pacing debt the simulator still catches up on; beyond it (a stall: the machine's load, a
+#: lockstep wait) the pacing restarts from now instead of racing ahead at full speed until the debt is paid: a
+#: catch-up burst ran a CI flight at 1.6x real time, faster than the MAVLink clients' own clocks expect
+PACING_MAX_DEBT_S = 0.2
 
 
 class SimulatorNode(Node):
@@ -169,6 +173,7 @@ class SimulatorNode(Node):
         self._payload_changes_logged = 0
         self._wall_start: float | None = None
         self._sim_start = 0.0
+        self.pacing_debt_dropped = 0.0  #: [s of wall time] pacing debt not caught up (PACING_MAX_DEBT_S)
         self.get_logger().info(
             f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
             f"sending to {self.sim.remote_ports}, "
@@ -272,15 +277,28 @@ class SimulatorNode(Node):
             self.get_logger().warning(f"lockstep: {self._last_timeouts} control periods timed out waiting "
                                       f"for setpoints (latest {self.sim.last_timeout})", throttle_duration_sec=5.0)
         if self.real_time_factor > 0.0:
-            ahead = (t - self._sim_start) / self.real_time_factor - (time.monotonic() - self._wall_start)
-            if ahead > 0.0:
-                time.sleep(ahead)
+            self._pace(t)
         if self.duration > 0.0 and t >= self.duration:
             self.get_logger().info(f"duration {self.duration} s reached: stopping "
                                    f"(lockstep timeouts: {self.sim.lockstep_timeouts}, oldest setpoint on "
                                    f"arrival: {1000.0 * self.sim.setpoint_latency_max():.0f} ms)")
             return False
         return True
+
+    def _pace(self, t: float) -> None:
+        """Sleep until wall time catches up with ``t`` / real_time_factor; a debt beyond PACING_MAX_DEBT_S is
+        dropped (the pacing restarts from now), counted and said at most every 10 s."""
+        now = time.monotonic()
+        ahead = (t - self._sim_start) / self.real_time_factor - (now - self._wall_start)
+        if ahead > 0.0:
+            time.sleep(ahead)
+        elif ahead < -PACING_MAX_DEBT_S:
+            self._wall_start, self._sim_start = now, t
+            self.pacing_debt_dropped += -ahead
+            self.get_logger().info(
+                f"slower than real_time_factor {self.real_time_factor:g} (machine load or a lockstep wait): "
+                f"{self.pacing_debt_dropped:.1f} s of wall time not caught up so far; the pacing restarts from "
+                f"t = {t:.3f} s instead of running ahead", throttle_duration_sec=10.0)
 
     def _log_payload_changes(self, changes) -> None:
         """One INFO line per payload attached (picked up) or released (fpr_sim.environment.PayloadChange)."""

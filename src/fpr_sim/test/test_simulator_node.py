@@ -254,3 +254,28 @@ def test_a_waiting_lockstep_keeps_the_mavlink_links_alive():
         sim_node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_a_stalled_simulator_does_not_race_to_catch_up():
+    """Pacing at real_time_factor: a small debt is caught up, a stall beyond PACING_MAX_DEBT_S (machine load) is
+    dropped, counted and the pacing restarts from there, so the simulation never runs ahead of the wall clock's
+    rate (a catch-up burst ran a CI flight at 1.6x and starved the MAVSDK clients' rate count)."""
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import PACING_MAX_DEBT_S, SimulatorNode
+
+        overrides = [Parameter("local_base_port", value=0), Parameter("remote_base_port", value=0),
+                     Parameter("real_time_factor", value=1.0)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        sim_node._wall_start, sim_node._sim_start = time.monotonic() - 0.5 * PACING_MAX_DEBT_S, 0.0
+        sim_node._pace(0.0)  # a small debt: kept (caught up)
+        assert sim_node.pacing_debt_dropped == 0.0 and sim_node._sim_start == 0.0
+        sim_node._wall_start = time.monotonic() - 5.0  # a 5 s stall
+        sim_node._pace(1.0)
+        assert 3.9 < sim_node.pacing_debt_dropped < 4.5
+        assert sim_node._sim_start == 1.0  # the pacing restarts at t = 1 s, now
+        ahead = (1.002 - sim_node._sim_start) - (time.monotonic() - sim_node._wall_start)
+        assert ahead > -PACING_MAX_DEBT_S  # the next step is paced again, not part of a burst
+        sim_node.destroy_node()
+    finally:
+        rclpy.shutdown()
