@@ -8,8 +8,8 @@
 # each in its own private network namespace (own loopback, own ROS domain: their simulators' MAVLink ports and
 # ROS topics cannot meet): the experiments' quick flights (tests/test_experiments_quick.py: the deterministic
 # in-process runner, whose results do not depend on the machine's load) beside everything else, which also takes
-# the longest quick flight (table_3_2) so that both end together (CI machine, 2 cores: 29.6 min with all quick
-# flights on one side, 35 min as one session). The second session's output follows the first's; the status is
+# one quick flight (fig_3_4) so that both end together (CI machine, 2 cores: 29.6 min with all quick flights on
+# one side, 35 min as one session, ~22 min balanced). The second session's output follows the first's; the status is
 # non-zero if either failed. FPR_TEST_JOBS=1 runs one session (also chosen when `unshare -n` is not available: the
 # two would share 127.0.0.1's ports).
 set -euo pipefail
@@ -19,7 +19,7 @@ cd "$ROOT"
 status=0
 QUICK=tests/test_experiments_quick.py
 FLIGHTS=test_experiment_runs_quick_and_passes_its_checks  # the quick flights of $QUICK
-MOVED=table_3_2  # the quick flight that runs with the rest
+MOVED=fig_3_4  # the quick flight that runs with the rest
 if [[ $# -eq 0 && "${FPR_TEST_JOBS:-2}" != 1 ]] && unshare -n true 2>/dev/null; then
   log="$(mktemp "${TMPDIR:-/tmp}/fpr_tests_quick.XXXXXX")"
   echo "[tests] two sessions side by side: the quick flights of $QUICK but $MOVED (output below, after the other one) and the rest"

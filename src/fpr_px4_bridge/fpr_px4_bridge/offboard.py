@@ -239,9 +239,24 @@ class OffboardStateMachine:
             if state == BridgeState.IDLE:
                 self._last_rejoin = None  # landed: a new flight
 
-    def _enter_emergency(self, now: float, verdict: Verdict, context: str = "") -> None:
-        """OFFBOARD (or a rejoin) -> EMERGENCY: PX4 Hold now, AUTO.LAND after emergency_hold_time (module doc)."""
+    def _enter_emergency(self, now: float, verdict: Verdict, context: str = "", resumed: bool = False) -> None:
+        """OFFBOARD (or a rejoin) -> EMERGENCY: PX4 Hold now, AUTO.LAND after emergency_hold_time (module doc).
+        ``resumed``: a fault during a rejoin's warm-up, before PX4 flew the stream again: the emergency of before
+        goes on (its Hold deadline too), not a new one nor a flapping cause (REPEATED) — a restarted node's
+        first seconds have transients (fault runs: a restarted controller's status 0.16 s late 0.07 s into the
+        rejoin landed the swarm)."""
         since_rejoin = None if self._last_rejoin is None else now - self._last_rejoin
+        if resumed and self._emergency_since is not None and not verdict.latched:
+            elapsed = now - self._emergency_since
+            self._enter(BridgeState.EMERGENCY, "warn",
+                        f"swarm emergency ({'own fault' if verdict.own else 'following the swarm'}{context}): "
+                        f"{verdict.reason}; PX4 Hold again, AUTO.LAND "
+                        f"{max(0.0, self.config.emergency_hold_time - elapsed):.1f} s from now unless it clears "
+                        f"(the emergency of {elapsed:.1f} s ago goes on)")
+            self.emergency = verdict
+            self._emergency_landing = False
+            self._clear_since = None
+            return
         if since_rejoin is not None and since_rejoin < self.config.rejoin_window and not verdict.latched:
             verdict = Verdict(Cause.REPEATED, f"{verdict.reason}, again {since_rejoin:.1f} s after a rejoin "
                                               f"(rejoin_window {self.config.rejoin_window:g} s)", latched=True)
@@ -362,7 +377,8 @@ class OffboardStateMachine:
                             f"arming failed after {self.config.command_max_attempts} attempts")
         elif state == BridgeState.WARMUP:
             if self._rejoining and verdict is not None and verdict.emergency:
-                self._enter_emergency(now, verdict, ", again while rejoining")
+                self._enter_emergency(now, verdict, ", again while rejoining, PX4 not yet in OFFBOARD",
+                                      resumed=not offboard)
                 self._emergency_step(now, connected, setpoint_fresh, verdict, decision)
             elif verdict is not None and verdict.peer_landing and self.armed:
                 # joining a swarm that lands in its emergency response: land with it

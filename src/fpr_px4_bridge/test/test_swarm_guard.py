@@ -243,6 +243,61 @@ def test_a_new_fault_during_the_rejoin_returns_to_the_emergency():
     assert m.state == BridgeState.EMERGENCY
 
 
+def test_a_fault_in_the_rejoin_warm_up_resumes_the_emergency_instead_of_landing():
+    """Before PX4 flies the stream again (WARMUP, PX4 still in Hold) a new fault is not a flapping cause: the
+    emergency of before goes on with its own Hold deadline, and the UAV can rejoin once it clears (fault runs: a
+    restarted controller's status 0.16 s late just after the rejoin landed the swarm)."""
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    m.step(2.0, True, NONE)
+    m.step(2.6, True, NONE)
+    assert m.state == BridgeState.WARMUP
+    d = m.step(2.62, True, OWN)  # PX4 still in Hold
+    assert m.state == BridgeState.EMERGENCY and m.emergency == OWN and m.emergency.cause is not Cause.REPEATED
+    assert "AUTO.LAND" not in labels(d) and any("goes on" in e.text for e in d.events)
+    m.step(2.7, True, NONE)
+    d = m.step(3.25, True, NONE)  # clear for rejoin_delay: rejoins again
+    assert m.state == BridgeState.WARMUP
+    m.step(3.27, True, NONE)
+    m.on_heartbeat(ARMED, OFFBOARD, 3.3)
+    m.step(3.32, True, NONE)
+    assert m.state == BridgeState.OFFBOARD
+
+
+def test_a_fault_in_the_rejoin_warm_up_keeps_the_first_emergency_s_deadline():
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    for t in (1.05, 2.0, 3.0, 4.0, 4.95):
+        m.on_heartbeat(ARMED, HOLD, t)
+    m.step(5.0, True, NONE)
+    m.on_heartbeat(ARMED, HOLD, 5.55)
+    m.step(5.6, True, NONE)
+    assert m.state == BridgeState.WARMUP
+    m.step(5.62, True, OWN)
+    assert m.state == BridgeState.EMERGENCY
+    commands = []
+    t = 5.64
+    while t < 6.2:
+        m.on_heartbeat(ARMED, HOLD, t)
+        commands += [(t, c) for c in labels(m.step(t, True, OWN))]
+        t = round(t + 0.02, 9)
+    land = [t for t, c in commands if c == "AUTO.LAND"]
+    assert land and land[0] == pytest.approx(6.0, abs=0.021)  # 5 s after the first entry (1.0 s), not after 5.62
+
+
+def test_a_fault_once_px4_flies_the_rejoin_is_a_flapping_cause():
+    m = flying_machine()
+    m.step(1.0, True, PEER)
+    m.on_heartbeat(ARMED, HOLD, 1.05)
+    m.step(2.0, True, NONE)
+    m.step(2.6, True, NONE)
+    assert m.state == BridgeState.WARMUP
+    m.on_heartbeat(ARMED, OFFBOARD, 2.61)  # PX4 flies the stream, the bridge has not yet confirmed it
+    m.step(2.62, True, OWN)
+    assert m.state == BridgeState.EMERGENCY and m.emergency.cause is Cause.REPEATED
+
+
 def _rejoined(m, at: float) -> None:
     """EMERGENCY (peer) at ``at``, clear from at + 0.5, rejoined and back in OFFBOARD by at + 1.2."""
     m.step(at, True, PEER)
