@@ -153,9 +153,9 @@ class Px4Config:
     #: MPC_XY_VEL_I_ACC 2.0 (PX4 0.4, range 0-60): with PX4's defaults the hover scenario (legs 45°, platform above
     #: the UAVs) collapses in Hold within 10 s, the structure's weight acting on the UAVs' horizontal positions as a
     #: negative stiffness larger than the loop's (test_px4_gcs.py); with 1.8 / 3.0 / 0.4 (before) the swarm's
-    #: emergency Hold after a dead bridge still folded the legs to 20-38° of platform tilt, with these 5.6-22°
-    #: (docs/safety.md, alternative soft_hold). The FPR's PX4s are tuned for the attached vehicles, as their
-    #: attitude gains are.
+    #: emergency Hold after a dead bridge still folded the legs to 20-38° of platform tilt, with these 3.2-10.8°
+    #: (docs/safety.md; 20-38°: the matrix of 2026-12-03 before this change, alternative soft_hold). The FPR's
+    #: PX4s are tuned for the attached vehicles, as their attitude gains are.
     position_control: PositionControlConfig = field(
         default_factory=lambda: PositionControlConfig(xy_p=2.0, xy_vel_p=4.0, xy_vel_i=2.0))
     yaw_offsets: list[float] = field(default_factory=lambda: [0.0])  #: F0i yaw offset per UAV [rad]
