@@ -170,10 +170,10 @@ class PoseEstimatorNode(Node):
             else:
                 logger.info(line)
 
-    def _before_clock(self) -> bool:
+    def _before_clock(self, now: float) -> bool:
         """No /clock yet (use_sim_time: the node's time is 0): an input cannot be checked against the node's
         time, and would be refused as 'in the future'; dropped, said once (a multi-process start, nominal)."""
-        if self._now() > 0.0:
+        if now > 0.0:
             return False
         if not self._pre_clock_said:
             self._pre_clock_said = True
@@ -181,9 +181,9 @@ class PoseEstimatorNode(Node):
         return True
 
     def _on_imu(self, msg: Imu) -> None:
-        if self._before_clock():
-            return
         now = self._now()
+        if self._before_clock(now):
+            return
         stamp = _stamp_seconds(msg.header.stamp) or now
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
         force = None if msg.linear_acceleration_covariance[0] == -1.0 else np.array([a.x, a.y, a.z])  # REP-145
@@ -196,11 +196,12 @@ class PoseEstimatorNode(Node):
         self._log_events()
 
     def _on_marker(self, msg: MarkerDetection) -> None:
-        if self._before_clock():
+        now = self._now()
+        if self._before_clock(now):
             return
         q, t = msg.pose.orientation, msg.pose.position
         capture = _stamp_seconds(msg.header.stamp) or None
-        self.core.on_marker(self._now(), np.array([t.x, t.y, t.z]), np.array([q.w, q.x, q.y, q.z]), capture)
+        self.core.on_marker(now, np.array([t.x, t.y, t.z]), np.array([q.w, q.x, q.y, q.z]), capture)
         self._log_events()
 
     def _on_timer(self) -> None:

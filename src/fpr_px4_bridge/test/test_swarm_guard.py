@@ -232,13 +232,19 @@ def test_emergency_rejoins_once_the_cause_stays_clear():
     assert m.state == BridgeState.OFFBOARD
 
 
-def test_a_new_fault_during_the_rejoin_returns_to_the_emergency():
+def _in_rejoin_warm_up():
+    """A machine in EMERGENCY (peer) from 1.0 s, clear from 2.0 s, rejoining (WARMUP, PX4 still in Hold) at 2.6 s."""
     m = flying_machine()
     m.step(1.0, True, PEER)
     m.on_heartbeat(ARMED, HOLD, 1.05)
     m.step(2.0, True, NONE)
     m.step(2.6, True, NONE)
     assert m.state == BridgeState.WARMUP
+    return m
+
+
+def test_a_new_fault_during_the_rejoin_returns_to_the_emergency():
+    m = _in_rejoin_warm_up()
     m.step(2.62, True, PEER)
     assert m.state == BridgeState.EMERGENCY
 
@@ -247,12 +253,7 @@ def test_a_fault_in_the_rejoin_warm_up_resumes_the_emergency_instead_of_landing(
     """Before PX4 flies the stream again (WARMUP, PX4 still in Hold) a new fault is not a flapping cause: the
     emergency of before goes on with its own Hold deadline, and the UAV can rejoin once it clears (fault runs: a
     restarted controller's status 0.16 s late just after the rejoin landed the swarm)."""
-    m = flying_machine()
-    m.step(1.0, True, PEER)
-    m.on_heartbeat(ARMED, HOLD, 1.05)
-    m.step(2.0, True, NONE)
-    m.step(2.6, True, NONE)
-    assert m.state == BridgeState.WARMUP
+    m = _in_rejoin_warm_up()
     d = m.step(2.62, True, OWN)  # PX4 still in Hold
     assert m.state == BridgeState.EMERGENCY and m.emergency == OWN and m.emergency.cause is not Cause.REPEATED
     assert "AUTO.LAND" not in labels(d) and any("goes on" in e.text for e in d.events)
@@ -287,12 +288,7 @@ def test_a_fault_in_the_rejoin_warm_up_keeps_the_first_emergency_s_deadline():
 
 
 def test_a_fault_once_px4_flies_the_rejoin_is_a_flapping_cause():
-    m = flying_machine()
-    m.step(1.0, True, PEER)
-    m.on_heartbeat(ARMED, HOLD, 1.05)
-    m.step(2.0, True, NONE)
-    m.step(2.6, True, NONE)
-    assert m.state == BridgeState.WARMUP
+    m = _in_rejoin_warm_up()
     m.on_heartbeat(ARMED, OFFBOARD, 2.61)  # PX4 flies the stream, the bridge has not yet confirmed it
     m.step(2.62, True, OWN)
     assert m.state == BridgeState.EMERGENCY and m.emergency.cause is Cause.REPEATED
