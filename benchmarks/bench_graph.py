@@ -1,7 +1,8 @@
 """The whole simulated graph's speed (fpr_experiments' in-process runner): real-time factor and CPU seconds per
 simulated second, for n = 3 / 6 with emulated marker poses or rendered images + ArUco, and the levers as ratios in
 one run: the deterministic single-thread runner vs the threaded one (background executor + the simulator's
-lockstep), lean nodes (no parameter services, no default QoS event handlers) and the /clock rate. Flight: the
+lockstep), lean nodes (no parameter services, no default QoS event handlers), the /clock rate and the executor
+that drains the deterministic runner (rclpy's SingleThreadedExecutor or fpr_experiments' SweepExecutor). Flight: the
 takeoff_landing experiment's scenario and script for n = 3 (arm on the ground, fly, climb), steps_roll_legs for
 n = 6, ``--seconds`` simulated from the start (default 12). Run on a quiet machine, through the isolation:
 
@@ -29,15 +30,18 @@ CASES = {
     "n6_emulated": (6, "n6_unequal", "steps_roll_legs", "emulated"),
     "n6_images": (6, "n6_unequal", "steps_roll_legs", "images"),
 }
-#: lever -> (deterministic runner, lean nodes, /clock rate [Hz], realism profile); the first is the baseline
-#: (main before); the last two compare the realism profiles on the default runner (issue 11: hardware <= 20 % cost)
-LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal"),
-          "threaded, lean nodes": (False, True, 250.0, "ideal"),
-          "threaded, /clock 100 Hz": (False, False, 100.0, "ideal"),
-          "threaded, lean + /clock 100 Hz": (False, True, 100.0, "ideal"),
-          "deterministic, full nodes, /clock 250 Hz": (True, False, 250.0, "ideal"),
-          "deterministic, lean + /clock 100 Hz (default)": (True, True, 100.0, "ideal"),
-          "deterministic, lean + /clock 100 Hz, hardware realism": (True, True, 100.0, "hardware")}
+#: lever -> (deterministic runner, lean nodes, /clock rate [Hz], realism profile, executor); the first is the
+#: baseline (main before issue 15); the deterministic runner drains with rclpy's executor or the SweepExecutor
+#: (fpr_experiments.sweep_executor); the last compares the realism profiles on the default runner (issue 11:
+#: hardware <= 20 % cost)
+LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", "rclpy"),
+          "threaded, lean nodes": (False, True, 250.0, "ideal", "rclpy"),
+          "threaded, /clock 100 Hz": (False, False, 100.0, "ideal", "rclpy"),
+          "threaded, lean + /clock 100 Hz": (False, True, 100.0, "ideal", "rclpy"),
+          "deterministic, full nodes, /clock 250 Hz, rclpy executor": (True, False, 250.0, "ideal", "rclpy"),
+          "deterministic, lean + /clock 100 Hz, rclpy executor": (True, True, 100.0, "ideal", "rclpy"),
+          "deterministic, lean + /clock 100 Hz, sweep executor (default)": (True, True, 100.0, "ideal", "sweep"),
+          "default + hardware realism": (True, True, 100.0, "hardware", "sweep")}
 
 
 def _cpu() -> float:
@@ -58,7 +62,7 @@ def _entities(graph: InProcessGraph) -> int:
 
 
 def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
-             realism: str = "ideal") -> dict:
+             realism: str = "ideal", executor: str = "sweep") -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -68,8 +72,8 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
     options = GraphOptions(n=n, mode="communicating", cameras=cameras, scenario=scenario, script=script,
                            parameters={"simulator": {"clock_rate": clock_rate}, **model}, realism=realism)
     load_before = os.getloadavg()[0]
-    with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean,
-                        deterministic=deterministic) as graph:
+    with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
+                        executor=executor if deterministic else None) as graph:
         graph.wait_for_discovery()
         entities = _entities(graph)
         wall, cpu = time.monotonic(), _cpu()
@@ -86,7 +90,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=12.0, help="simulated seconds per run")
     parser.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
-    parser.add_argument("--levers", default="all", help="'all' or comma-separated lever numbers (0 = baseline)")
+    parser.add_argument("--levers", default="all", help="'all' or comma-separated lever numbers (0 = baseline): "
+                        + "; ".join(f"{k} {name}" for k, name in enumerate(LEVERS)))
     args = parser.parse_args()
     levers = list(LEVERS.items())
     if args.levers != "all":
@@ -95,8 +100,8 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}", flush=True)
     for case in args.cases.split(","):
         baseline = None
-        for name, (deterministic, lean, clock_rate, realism) in levers:
-            r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism)
+        for name, (deterministic, lean, clock_rate, realism, executor) in levers:
+            r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor)
             baseline = baseline or r
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "

@@ -13,7 +13,11 @@ a condition. Two ways to run the graph:
   again. The setpoints computed on ``/clock`` T are on the emulators' sockets before the simulation passes T, so
   the simulator's own lockstep is off (the drain is the lockstep). Nothing depends on wall time or on thread
   scheduling: the same scenario and seed give the same ground truth bit for bit on an idle or a loaded machine
-  (tests/test_determinism.py).
+  (tests/test_determinism.py). The drain is done by :class:`~fpr_experiments.sweep_executor.SweepExecutor`
+  (``executor="sweep"``, the default with lean nodes; the recorder is swept too, no thread of its own): it polls
+  instead of rebuilding rclpy's wait set at every wait, ×1.5-1.7 real-time factor (docs/benchmarks.md).
+  ``executor="rclpy"`` drains with rclpy's SingleThreadedExecutor (needed for full nodes: their parameter
+  services' clients and QoS event handlers are not served by the sweep).
 - threaded: the graph spins in a background executor thread; the simulator's lockstep waits at every 20 ms
   boundary for each streaming UAV's setpoint computed for that period (fpr_sim.simulation), and a backpressure
   (``max_graph_lag``) keeps the simulation from running ahead of the graph while nothing streams. Results then
@@ -43,6 +47,7 @@ from rclpy.node import Node
 from fpr_experiments.graph import NodeSpec
 from fpr_experiments.node_factory import build_node
 from fpr_experiments.recording import Recorder, Topic
+from fpr_experiments.sweep_executor import SweepExecutor
 
 #: topics every node has and nobody waits for
 _IGNORED_TOPICS = ("/rosout", "/parameter_events")
@@ -52,13 +57,31 @@ class InProcessGraph:
     """See the module doc. A context manager: ``close()`` destroys every node and shuts the context down."""
 
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
-                 lean: bool = True, deterministic: bool = True, live_view=None) -> None:
+                 lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
+                 real_time_factor: float | None = None) -> None:
+        """``executor``: "sweep" or "rclpy" (deterministic mode; None: sweep for lean nodes, else rclpy); the
+        threaded mode always spins rclpy's executor. ``real_time_factor``: the simulator's pacing (0: as fast as
+        the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
+        view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter."""
         self.deterministic = deterministic
+        if executor is None:
+            executor = "sweep" if deterministic and lean else "rclpy"
+        if executor not in ("sweep", "rclpy"):
+            raise ValueError(f"executor must be 'sweep' or 'rclpy', got {executor!r}")
+        if executor == "sweep" and not deterministic:
+            raise ValueError("executor 'sweep' needs deterministic=True (the threaded runner waits in rclpy)")
+        self.executor_kind = executor
         self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
+        if real_time_factor is None and deterministic and live_view is None:
+            real_time_factor = 0.0
+        pace = {} if real_time_factor is None else {"real_time_factor": float(real_time_factor)}
         if deterministic:  # bridges read MAVLink when told; the drain replaces the simulator's lockstep
             specs = [replace(s, parameters={**s.parameters, "receive_thread": False}) if s.executable == "px4_bridge"
-                     else replace(s, parameters={**s.parameters, "lockstep": False}) if s.executable == "simulator"
-                     else s for s in specs]
+                     else replace(s, parameters={**s.parameters, "lockstep": False, **pace})
+                     if s.executable == "simulator" else s for s in specs]
+        elif pace:
+            specs = [replace(s, parameters={**s.parameters, **pace}) if s.executable == "simulator" else s
+                     for s in specs]
         self.specs = list(specs)
         self.max_graph_lag = max_graph_lag
         self.lean = lean  #: nodes without parameter services / default QoS event handlers (node_factory.build_node)
@@ -71,6 +94,7 @@ class InProcessGraph:
         self.recorder: Recorder | None = None
         self._running = True
         self._executor: SingleThreadedExecutor | None = None
+        self._sweep: SweepExecutor | None = None
         self._spinner: threading.Thread | None = None
         try:
             self._build(topics)
@@ -86,11 +110,19 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view)
-        self._executor = SingleThreadedExecutor(context=self.context)
-        for node in self.nodes:
-            if node is not self.simulator:
-                self._executor.add_node(node)
+        sweep = self.executor_kind == "sweep"
+        self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view,
+                                 spin=not sweep)
+        if sweep:
+            self._sweep = SweepExecutor()
+            for node in [*self.nodes, self.recorder]:
+                if node is not self.simulator:
+                    self._sweep.add_node(node)
+        else:
+            self._executor = SingleThreadedExecutor(context=self.context)
+            for node in self.nodes:
+                if node is not self.simulator:
+                    self._executor.add_node(node)
         # the graph's clock: a node spun by the main executor (its /clock lags as the executor does)
         self._graph_clock_node = next(n for n in reversed(self.nodes) if n is not self.simulator)
         self._bridges = [node for spec, node in zip(self.specs, self.nodes, strict=True)
@@ -110,9 +142,12 @@ class InProcessGraph:
                 self.errors.append(repr(error))
 
     def drain(self) -> int:
-        """Deterministic mode: run every ready callback of the graph, and what they make ready, until two waits
-        in a row find nothing (rclpy's executor answers one wait per generator: the first empty answer can be the
-        end of the previous batch); callback exceptions are kept in :attr:`errors`. Returns the callbacks run."""
+        """Deterministic mode: run every ready callback of the graph, and what they make ready, to quiescence;
+        callback exceptions are kept in :attr:`errors`. Returns the callbacks run. With rclpy's executor: until
+        two waits in a row find nothing (it answers one wait per generator: the first empty answer can be the end
+        of the previous batch)."""
+        if self._sweep is not None:
+            return self._sweep.drain(self.errors)
         executor, done, empty = self._executor, 0, 0
         while empty < 2:
             try:

@@ -80,13 +80,19 @@ def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[T
 
 
 class Recorder(Node):
-    """Raw subscriptions to ``topics``, spun by its own executor in a background thread (see the module doc)."""
+    """Raw subscriptions to ``topics``, spun by its own executor in a background thread unless ``spin`` is False
+    (see the module doc)."""
 
-    def __init__(self, context, topics: Iterable[Topic], use_sim_time: bool = True, live_view=None) -> None:
+    def __init__(self, context, topics: Iterable[Topic], use_sim_time: bool = True, live_view=None,
+                 spin: bool = True) -> None:
         """``live_view``: a :class:`fpr_experiments.live_view.LiveView` every received message is forwarded to
-        (the same bytes, stamped with the recorder's clock), or None."""
+        (the same bytes, stamped with the recorder's clock), or None. ``spin`` False: no executor thread of its
+        own; the caller's executor serves the subscriptions (the deterministic in-process runner)."""
         from rclpy.parameter import Parameter
 
+        # swept by the caller (spin False): no default QoS event handlers, as the lean nodes it records (set before
+        # Node.__init__, which creates the node's own publishers through create_publisher)
+        self._without_event_handlers = not spin
         super().__init__("experiment_recorder", context=context, use_global_arguments=False,
                          start_parameter_services=False,
                          parameter_overrides=[Parameter("use_sim_time", value=use_sim_time)])
@@ -101,11 +107,28 @@ class Recorder(Node):
                              else DurabilityPolicy.VOLATILE)
             self.create_subscription(topic.msg_type, topic.name, self._keep(self._data[topic.name], topic.name), qos,
                                      raw=True)
-        self._executor = SingleThreadedExecutor(context=context)
-        self._executor.add_node(self)
         self._running = True
-        self._thread = threading.Thread(target=self._spin, name="experiment_recorder", daemon=True)
-        self._thread.start()
+        self._executor: SingleThreadedExecutor | None = None
+        self._thread: threading.Thread | None = None
+        if spin:
+            self._executor = SingleThreadedExecutor(context=context)
+            self._executor.add_node(self)
+            self._thread = threading.Thread(target=self._spin, name="experiment_recorder", daemon=True)
+            self._thread.start()
+
+    def create_publisher(self, *args, event_callbacks=None, **kwargs):
+        if event_callbacks is None and self._without_event_handlers:
+            from rclpy.event_handler import PublisherEventCallbacks
+
+            event_callbacks = PublisherEventCallbacks(use_default_callbacks=False)
+        return super().create_publisher(*args, event_callbacks=event_callbacks, **kwargs)
+
+    def create_subscription(self, *args, event_callbacks=None, **kwargs):
+        if event_callbacks is None and self._without_event_handlers:
+            from rclpy.event_handler import SubscriptionEventCallbacks
+
+            event_callbacks = SubscriptionEventCallbacks(use_default_callbacks=False)
+        return super().create_subscription(*args, event_callbacks=event_callbacks, **kwargs)
 
     def _keep(self, store: list, topic: str):
         def callback(data: bytes) -> None:
@@ -166,8 +189,10 @@ class Recorder(Node):
 
     def stop(self) -> None:
         self._running = False
-        self._thread.join(timeout=5.0)
-        self._executor.shutdown(timeout_sec=1.0)
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        if self._executor is not None:
+            self._executor.shutdown(timeout_sec=1.0)
         self.destroy_node()
 
 

@@ -1,0 +1,151 @@
+"""A polling executor for the deterministic in-process graph (issue 15, "the executor").
+
+The deterministic runner (:mod:`fpr_experiments.inprocess`) runs every callback the simulator's last step made
+ready, to quiescence, in ONE thread. rclpy's :class:`~rclpy.executors.SingleThreadedExecutor` does that through
+``wait_for_ready_callbacks``: every wait rebuilds a wait set of every entity of every node (Python loops over
+~80-150 entities, context managers, callback-group checks), calls ``rcl_wait``, and wraps each ready callback in a
+coroutine task; measured on the n = 3 flight, that machinery cost more than the callbacks themselves (drain 13.4 s
+of which the callbacks 5.7 s, 8 s simulated; docs/benchmarks.md). Here nothing waits: the runner already knows
+when something may be ready (right after it stepped the simulator or read MAVLink), so :meth:`SweepExecutor.drain`
+
+- sweeps the nodes in the order they were added; per node, every timer whose ``is_timer_ready()`` (rcl, on the
+  node's clock: /clock time in simulation) is called, then ONE message is taken from each subscription (an empty
+  take costs ~1 µs) and its callback run, exactly as rclpy's executor does it (``call_timer`` then the callback;
+  ``take_message`` then the callback with the message, or message and ``MessageInfo`` for subscriptions that ask
+  for it);
+- repeats the sweep until one finds nothing: what a callback published is delivered synchronously inside one
+  context, so it is taken in the next sweep; a subscription's queued messages go one per sweep (the order rclpy
+  gives them too: one take per ready subscription per wait);
+- serves each node's services (Jazzy's type-description service of every node) once per drain, first.
+
+The order is fixed (nodes as added, timers before subscriptions, entities in creation order), so the same
+scenario and seed give the same callbacks in the same order on any machine. Only plain (not ``async``)
+callbacks, timers, subscriptions and services are served: a node with clients, guard conditions or waitables
+(QoS event handlers: the lean nodes have none) is refused at :meth:`add_node` with a message saying to use rclpy's
+executor (the threaded runner), rather than silently never serving them. Entities created or destroyed later are
+picked up at the next drain (the lists are re-read when their lengths change).
+
+Written here rather than taken from rclpy because rclpy's executors wait by design; its ``EventsExecutor``
+(rclpy.experimental) avoids the rebuild but with a ``/clock``-driven ROS time its timers fired twice then skipped
+(250 Hz /clock) or stalled (50 Hz) in the measurements of issue 15, and it is still experimental in Jazzy.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+
+from rclpy.node import Node
+from rclpy.subscription import Subscription
+
+__all__ = ["SweepExecutor", "UnsupportedEntity"]
+
+
+class UnsupportedEntity(TypeError):
+    """A node has an entity the sweep does not serve (client, guard condition, waitable, async callback)."""
+
+
+class SweepExecutor:
+    """See the module doc. ``drain(errors)`` runs everything ready to quiescence and returns the callbacks run;
+    an exception in a callback is appended to ``errors`` (``repr``) and the sweep goes on, as the runner keeps
+    the graph alive and lets the flight metrics decide."""
+
+    #: sweeps of one drain before it says the graph does not settle (a callback chain re-triggering itself)
+    MAX_SWEEPS = 10_000
+
+    def __init__(self) -> None:
+        self._nodes: list[Node] = []
+        self._signature: tuple[int, ...] = ()
+        #: per node: (timers, subscriptions with how each callback is called, services), in creation order
+        self._entities: list[tuple[list, list[tuple[Subscription, bool]], list]] = []
+
+    def add_node(self, node: Node) -> None:
+        self._check(node)
+        self._nodes.append(node)
+        self._refresh()
+
+    @property
+    def nodes(self) -> list[Node]:
+        return list(self._nodes)
+
+    @staticmethod
+    def _check(node: Node) -> None:
+        unsupported = [f"{len(list(getattr(node, kind)))} {kind}" for kind in ("clients", "guards", "waitables")
+                       if list(getattr(node, kind))]
+        if unsupported:
+            raise UnsupportedEntity(f"node '{node.get_name()}' has {', '.join(unsupported)}: SweepExecutor serves "
+                                    "timers, subscriptions and services only; run it with rclpy's executor "
+                                    "(InProcessGraph(deterministic=False)) or build it lean")
+        for entity in [*node.timers, *node.subscriptions, *node.services]:
+            if inspect.iscoroutinefunction(entity.callback):
+                raise UnsupportedEntity(f"node '{node.get_name()}': async callback {entity.callback!r} on "
+                                        f"{getattr(entity, 'topic_name', entity)}; SweepExecutor runs plain "
+                                        "callbacks only")
+
+    def _current_signature(self) -> tuple[int, ...]:
+        # rclpy's Node keeps its entities in these lists (its executors read them through the properties); the
+        # lengths tell cheaply whether a node created or destroyed something since the last drain
+        # (waitables are name-mangled private: `_Node__waitables`)
+        return tuple(len(lst) for node in self._nodes for lst in (node._timers, node._subscriptions,
+                                                                   node._services, node._clients, node._guards,
+                                                                   node._Node__waitables))
+
+    def _refresh(self) -> None:
+        for node in self._nodes:
+            self._check(node)
+        self._entities = [(list(node.timers),
+                           [(sub, sub._callback_type is Subscription.CallbackType.MessageOnly)
+                            for sub in node.subscriptions],
+                           list(node.services)) for node in self._nodes]
+        self._signature = self._current_signature()
+
+    def drain(self, errors: list[str]) -> int:
+        if self._current_signature() != self._signature:
+            self._refresh()
+        done = self._serve_services(errors)
+        for _ in range(self.MAX_SWEEPS):
+            ran = self._sweep(errors)
+            if ran == 0:
+                return done
+            done += ran
+        raise RuntimeError(f"SweepExecutor: the graph did not settle after {self.MAX_SWEEPS} sweeps ({done} "
+                           "callbacks): a callback keeps making itself ready")
+
+    def _sweep(self, errors: list[str]) -> int:
+        ran = 0
+        for timers, subscriptions, _ in self._entities:
+            for timer in timers:
+                handle = timer.handle
+                if handle.is_timer_ready():
+                    handle.call_timer()
+                    ran += 1
+                    _run(timer.callback, (), errors)
+            for subscription, message_only in subscriptions:
+                taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+                if taken is None:
+                    continue
+                ran += 1
+                _run(subscription.callback, (taken[0],) if message_only else taken, errors)
+        return ran
+
+    def _serve_services(self, errors: list[str]) -> int:
+        served = 0
+        for _, _, services in self._entities:
+            for service in services:
+                while True:
+                    request, header = service.handle.service_take_request(service.srv_type.Request)
+                    if header is None:
+                        break
+                    served += 1
+                    try:
+                        service.send_response(service.callback(request, service.srv_type.Response()), header)
+                    except Exception as error:  # noqa: BLE001 - report, keep serving
+                        errors.append(repr(error))
+        return served
+
+
+def _run(callback: Callable, args: tuple, errors: list[str]) -> None:
+    try:
+        callback(*args)
+    except Exception as error:  # noqa: BLE001 - report, keep the graph alive; the metrics decide
+        errors.append(repr(error))
