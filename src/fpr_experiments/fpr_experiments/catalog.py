@@ -47,11 +47,12 @@ from typing import Any
 
 from fpr_experiments.resources import EXPERIMENTS, JOY_SCRIPTS, SCENARIOS, UnknownNameError
 
-#: the realism profile of an experiment that names none (fpr_sim.scenario.realism_profiles): "hardware" (issue 11),
-#: calibrated on Table 3.2's impedance row and Table 4.2's C row only (docs/calibration.md), every other experiment
-#: its validation (docs/results.md). The first validation (docs/results_hardware.md, when the default was "ideal")
-#: flipped decentralized flights on their own seeds; traced to the estimator's fixed innovation gate (a lock-out
-#: during fast leg changes, fixed in fpr_estimation.gating), not to a realism value. "ideal" stays for unit tests.
+#: the realism profile of an experiment that names none (fpr_sim.scenario.realism_profiles). "hardware" (issue 11)
+#: is calibrated on Table 3.2's impedance row and Table 4.2's C row only (docs/calibration.md), every other
+#: experiment its validation (docs/results.md, made with ``run all --realism hardware``). The first validation
+#: (docs/results_hardware.md, when the default was "ideal") flipped decentralized flights on their own seeds;
+#: traced to the estimator's fixed innovation gate (a lock-out during fast leg changes, fixed in
+#: fpr_estimation.gating), not to a realism value. "ideal" stays for unit tests.
 DEFAULT_REALISM = "ideal"  # back from "hardware": the multi-process tests failed with it (stop 19 note)
 
 #: every experiment must keep these (DESIGN.md §5b): no flip, no fly-away, no crash, no NaN
