@@ -41,13 +41,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 from fpr_experiments.graph import NodeSpec
 from fpr_experiments.node_factory import build_node
 from fpr_experiments.recording import Recorder, Topic
-from fpr_experiments.sweep_executor import SweepExecutor
+from fpr_experiments.sweep_executor import SweepExecutor, drain_rclpy_executor
 
 #: topics every node has and nobody waits for
 _IGNORED_TOPICS = ("/rosout", "/parameter_events")
@@ -143,26 +143,10 @@ class InProcessGraph:
 
     def drain(self) -> int:
         """Deterministic mode: run every ready callback of the graph, and what they make ready, to quiescence;
-        callback exceptions are kept in :attr:`errors`. Returns the callbacks run. With rclpy's executor: until
-        two waits in a row find nothing (it answers one wait per generator: the first empty answer can be the end
-        of the previous batch)."""
+        callback exceptions are kept in :attr:`errors`. Returns the callbacks run."""
         if self._sweep is not None:
             return self._sweep.drain(self.errors)
-        executor, done, empty = self._executor, 0, 0
-        while empty < 2:
-            try:
-                handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0.0)
-            except TimeoutException:
-                empty += 1
-                continue
-            except ExternalShutdownException:
-                return done
-            empty = 0
-            handler()
-            done += 1
-            if handler.exception() is not None:  # report, keep the graph alive; the metrics decide
-                self.errors.append(repr(handler.exception()))
-        return done
+        return drain_rclpy_executor(self._executor, self.errors)
 
     def _deterministic_step(self) -> None:
         self.simulator.step()

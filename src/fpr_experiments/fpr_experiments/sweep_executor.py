@@ -35,10 +35,11 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable
 
+from rclpy.executors import Executor, ExternalShutdownException, TimeoutException
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 
-__all__ = ["SweepExecutor", "UnsupportedEntity"]
+__all__ = ["SweepExecutor", "UnsupportedEntity", "drain_rclpy_executor"]
 
 
 class UnsupportedEntity(TypeError):
@@ -149,3 +150,24 @@ def _run(callback: Callable, args: tuple, errors: list[str]) -> None:
         callback(*args)
     except Exception as error:  # noqa: BLE001 - report, keep the graph alive; the metrics decide
         errors.append(repr(error))
+
+
+def drain_rclpy_executor(executor: Executor, errors: list[str]) -> int:
+    """The same drain with rclpy's own executor (full nodes, and the reference the sweep is tested against): run
+    ready callbacks until two waits in a row find nothing (it answers one wait per generator: the first empty
+    answer can be the end of the previous batch); exceptions go to ``errors``. Returns the callbacks run."""
+    done, empty = 0, 0
+    while empty < 2:
+        try:
+            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0.0)
+        except TimeoutException:
+            empty += 1
+            continue
+        except ExternalShutdownException:
+            return done
+        empty = 0
+        handler()
+        done += 1
+        if handler.exception() is not None:  # report, keep the graph alive; the metrics decide
+            errors.append(repr(handler.exception()))
+    return done

@@ -13,8 +13,8 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 from fpr_experiments.node_factory import lean_class  # noqa: E402
-from fpr_experiments.sweep_executor import SweepExecutor, UnsupportedEntity  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor, TimeoutException  # noqa: E402
+from fpr_experiments.sweep_executor import SweepExecutor, UnsupportedEntity, drain_rclpy_executor  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
@@ -43,18 +43,6 @@ def _wait_matched(publisher, count: int = 1, timeout: float = 10.0) -> None:
         time.sleep(0.01)
 
 
-def _rclpy_drain(executor: SingleThreadedExecutor) -> None:
-    empty = 0
-    while empty < 2:
-        try:
-            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0.0)
-        except TimeoutException:
-            empty += 1
-            continue
-        empty = 0
-        handler()
-
-
 def _timer_ticks(context, executor_kind: str) -> dict[str, list[int]]:
     """Ticks [ns of ROS time] of a 50 Hz and a 20 Hz timer over 2 s of /clock at 100 Hz."""
     node = _node(f"ticker_{executor_kind}", context, sim_time=True)
@@ -63,10 +51,10 @@ def _timer_ticks(context, executor_kind: str) -> dict[str, list[int]]:
     ticks: dict[str, list[int]] = {"50 Hz": [], "20 Hz": []}
     node.create_timer(0.02, lambda: ticks["50 Hz"].append(node.get_clock().now().nanoseconds))
     node.create_timer(0.05, lambda: ticks["20 Hz"].append(node.get_clock().now().nanoseconds))
+    errors: list[str] = []
     if executor_kind == "sweep":
         executor = SweepExecutor()
         executor.add_node(node)
-        errors: list[str] = []
 
         def drain():
             executor.drain(errors)
@@ -75,15 +63,14 @@ def _timer_ticks(context, executor_kind: str) -> dict[str, list[int]]:
         rclpy_executor.add_node(node)
 
         def drain():
-            _rclpy_drain(rclpy_executor)
+            drain_rclpy_executor(rclpy_executor, errors)
     _wait_matched(clock_pub)
     for k in range(1, 201):  # 10 ms steps to 2 s
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(k * 10_000_000, 1_000_000_000)
         clock_pub.publish(msg)
         drain()
-    if executor_kind == "sweep":
-        assert errors == []
+    assert errors == []
     node.destroy_node()
     driver.destroy_node()
     return ticks
