@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import sys
 import time
 
@@ -31,6 +32,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--realism", default=None, metavar="PROFILE",
                         help="realism profile of the simulator and the inter-UAV link: ideal | hardware (default: "
                              "each experiment's, catalog key 'realism')")
+    parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE", dest="overrides",
+                        help="override one scenario value in every variant (repeatable; dotted key, YAML value), "
+                             "laid over the realism profile, e.g. --set actuation.thrust_noise=0.02 (ablations: "
+                             "the run's scenario.yaml keeps the merged values)")
     parser.add_argument("--processes", action="store_true",
                         help="one process per UAV / ground station / simulator, as on the robot (default: one)")
     parser.add_argument("--real-time-factor", type=float, default=0.5,
@@ -60,26 +65,51 @@ def _results_path(args) -> str:
 
 
 def _command_line(args) -> str:
-    parts = ["ros2 run fpr_experiments run all", *_experiment_flags(args)]
+    parts = ["ros2 run fpr_experiments run all", *(shlex.quote(token) for token in _experiment_flags(args))]
     if args.jobs > 1:
         parts.append(f"--jobs {args.jobs}")
     return " ".join(parts)
 
 
 def _experiment_flags(args) -> list[str]:
-    """The options of ``run all`` that each experiment's run takes too (results.md's command line, --jobs)."""
-    parts = []
+    """The options of ``run all`` that each experiment's run takes too (results.md's command line, --jobs), as
+    argument tokens."""
+    tokens = []
     if args.quick:
-        parts.append("--quick")
+        tokens.append("--quick")
     if args.seed is not None:
-        parts.append(f"--seed {args.seed}")
+        tokens += ["--seed", str(args.seed)]
     if args.cameras:
-        parts.append(f"--cameras {args.cameras}")
+        tokens += ["--cameras", args.cameras]
     if args.realism:
-        parts.append(f"--realism {args.realism}")
+        tokens += ["--realism", args.realism]
+    for override in args.overrides or []:
+        tokens += ["--set", override]
     if args.processes:
-        parts.append("--processes")
-    return [token for part in parts for token in part.split(" ")]
+        tokens.append("--processes")
+    return tokens
+
+
+def scenario_overrides(settings: list[str] | None) -> dict | None:
+    """``["actuation.thrust_noise=0.02", ...]`` -> the nested scenario overlay (values parsed as YAML: numbers,
+    booleans, lists); None without settings. A malformed setting is a ValueError naming it."""
+    import yaml
+
+    from fpr_experiments.calibration import nested_overrides
+
+    if not settings:
+        return None
+    assignment = {}
+    for setting in settings:
+        key, separator, text = setting.partition("=")
+        if not separator or not key.strip() or any(not part for part in key.strip().split(".")):
+            raise ValueError(f"--set {setting!r}: expected KEY=VALUE with a dotted scenario key, e.g. "
+                             "actuation.thrust_noise=0.02")
+        try:
+            assignment[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ValueError(f"--set {setting!r}: the value is not YAML ({error})") from None
+    return nested_overrides(assignment)
 
 
 def _write_results(names: list[str], output_root: str, path: str, command: str) -> str:
@@ -170,6 +200,7 @@ def run_main(argv: list[str] | None = None) -> int:
 
         if args.realism is not None:
             check_realism(args.realism, "--realism")
+        overrides = scenario_overrides(args.overrides)
         experiments = [load_experiment(name) for name in names]  # every name and file checked before anything flies
         start, status, failed = time.monotonic(), 0, []
         if args.live_view is not None and args.name == "all" and args.jobs > 1:
@@ -185,7 +216,8 @@ def run_main(argv: list[str] | None = None) -> int:
             result = run_experiment(name, seed=args.seed, quick=args.quick, cameras=args.cameras,
                                     processes=args.processes, variants=args.variant, output_root=output_root,
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
-                                    realism=args.realism, live_view_port=args.live_view)
+                                    realism=args.realism, live_view_port=args.live_view,
+                                    scenario_overrides=overrides)
             if not result.passed:
                 status = 1
                 failed.append(name)

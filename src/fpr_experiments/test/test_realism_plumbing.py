@@ -115,3 +115,26 @@ def test_run_all_jobs_runs_each_experiment_isolated_longest_first(monkeypatch, t
     assert len({env["ROS_DOMAIN_ID"] for _, env in started}) == 3
     assert failed == ["short"]
     assert cli._command_line(args) == "ros2 run fpr_experiments run all --seed 3 --realism ideal --jobs 2"
+
+
+def test_set_overrides_parse_as_a_nested_yaml_overlay_and_pass_to_every_experiment_run():
+    """``--set KEY=VALUE`` (ablations): dotted keys nest, values are YAML, and ``run all --jobs`` hands them on."""
+    import fpr_experiments.cli as cli
+
+    assert cli.scenario_overrides(None) is None
+    assert cli.scenario_overrides(["actuation.thrust_noise=0.02", "actuation.enabled=false",
+                                   "link.latency=[0.01, 0.02]"]) == {
+        "actuation": {"thrust_noise": 0.02, "enabled": False}, "link": {"latency": [0.01, 0.02]}}
+    for bad in ("actuation.thrust_noise", "=3", "actuation..noise=1", "a=[1,"):
+        with pytest.raises(ValueError, match="--set"):
+            cli.scenario_overrides([bad])
+    args = cli._parser().parse_args(["all", "--jobs", "2", "--set", "link.latency=[0.01, 0.02]"])
+    assert cli._experiment_flags(args) == ["--set", "link.latency=[0.01, 0.02]"]
+    assert cli._command_line(args) == "ros2 run fpr_experiments run all --set 'link.latency=[0.01, 0.02]' --jobs 2"
+
+
+def test_cli_set_with_an_unknown_scenario_key_is_one_line_before_anything_flies(tmp_path, capsys):
+    assert run_main(["table_3_2", "--set", "actuation.thrust_nosie=0.1", "--output-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "thrust_nosie" in err
+    assert not list(tmp_path.rglob("*.mcap"))  # nothing flown
