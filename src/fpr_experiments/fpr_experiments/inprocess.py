@@ -59,17 +59,19 @@ class InProcessGraph:
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
                  real_time_factor: float | None = None) -> None:
-        """``executor``: "sweep" or "rclpy" (deterministic mode; None: sweep for lean nodes, else rclpy); the
+        """``executor``: "sweep", "sweep-copy" (the sweep converting each message once per subscription, as rclpy
+        does, instead of once per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
+        sweep for lean nodes, else rclpy); the
         threaded mode always spins rclpy's executor. ``real_time_factor``: the simulator's pacing (0: as fast as
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
         view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
-        if executor not in ("sweep", "rclpy"):
-            raise ValueError(f"executor must be 'sweep' or 'rclpy', got {executor!r}")
-        if executor == "sweep" and not deterministic:
-            raise ValueError("executor 'sweep' needs deterministic=True (the threaded runner waits in rclpy)")
+        if executor not in ("sweep", "sweep-copy", "rclpy"):
+            raise ValueError(f"executor must be 'sweep', 'sweep-copy' or 'rclpy', got {executor!r}")
+        if executor != "rclpy" and not deterministic:
+            raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
         self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
         if real_time_factor is None and deterministic and live_view is None:
@@ -110,11 +112,11 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        sweep = self.executor_kind == "sweep"
+        sweep = self.executor_kind in ("sweep", "sweep-copy")
         self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view,
                                  spin=not sweep)
         if sweep:
-            self._sweep = SweepExecutor()
+            self._sweep = SweepExecutor(share_messages=self.executor_kind == "sweep")
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)

@@ -108,6 +108,37 @@ def test_subscriptions_in_order_with_message_info_when_asked(context):
     assert executor.drain(errors) == 0 and errors == []
 
 
+@pytest.mark.parametrize("share", [True, False])
+def test_one_message_is_converted_once_for_all_its_subscribers_unless_told_not_to(context, share):
+    """Every subscription of the process gets the message, equal in content; with sharing (the default) they get
+    ONE Python object per message (one deserialization), distinct messages stay distinct objects; without, each
+    subscription its own object, as with rclpy's executor. A raw subscription still gets the serialized bytes."""
+    node = _node(f"readers_{share}", context)
+    talker = _node(f"talker_share_{share}", context)
+    received: dict[str, list] = {"a": [], "b": [], "c": []}
+    for name in received:
+        node.create_subscription(Int32, "/shared", lambda msg, name=name: received[name].append(msg), 10)
+    raw = []
+    node.create_subscription(Int32, "/shared", raw.append, 10, raw=True)
+    executor = SweepExecutor(share_messages=share)
+    executor.add_node(node)
+    publisher = talker.create_publisher(Int32, "/shared", 10)
+    _wait_matched(publisher, 4)
+    for value in (5, 6):
+        publisher.publish(Int32(data=value))
+    errors: list[str] = []
+    assert executor.drain(errors) == 8 and errors == []
+    for name in received:
+        assert [m.data for m in received[name]] == [5, 6]
+    first, second = received["a"]
+    assert first is not second
+    assert all(isinstance(b, bytes) for b in raw) and len(raw) == 2
+    if share:
+        assert all(received[name][k] is received["a"][k] for name in "bc" for k in (0, 1))
+    else:
+        assert received["b"][0] is not first and received["c"][0] is not first
+
+
 def test_a_failing_callback_is_reported_and_the_others_run(context):
     node = _node("faulty", context)
     talker = _node("talker2", context)
