@@ -124,12 +124,15 @@ def _write_results(names: list[str], output_root: str, path: str, command: str) 
             continue
         with open(metrics, encoding="utf-8") as stream:
             summary = json.load(stream)
-        # the realism settings of the run (each variant's metrics.json keeps its scenario's)
+        # the realism settings and the cameras of the run (each variant's metrics.json keeps its scenario's)
         for variant in summary.get("variants", {}).values():
             variant_json = os.path.join(output_root, name, variant.get("report_dir", ""), "metrics.json")
-            if "realism" not in summary and os.path.exists(variant_json):
+            missing = [key for key in ("realism", "cameras") if not summary.get(key)]
+            if missing and os.path.exists(variant_json):
                 with open(variant_json, encoding="utf-8") as stream:
-                    summary["realism"] = json.load(stream).get("realism")
+                    variant_summary = json.load(stream)
+                for key in missing:
+                    summary[key] = variant_summary.get(key)
         summaries.append(summary)
         experiments[name] = load_experiment(name)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)

@@ -161,6 +161,11 @@ def write_experiment_report(experiment: Experiment, result, root: str, *, quick:
     first = next(iter(result.variants.values()), None)
     if first is not None and first.record is not None:
         summary["cameras"] = first.record.cameras
+    elif first is not None:  # no record kept (no plots): the variant's metrics.json says it
+        variant_json = os.path.join(first.report_dir, "metrics.json")
+        if os.path.exists(variant_json):
+            with open(variant_json, encoding="utf-8") as stream:
+                summary["cameras"] = json.load(stream).get("cameras")
     _write_json(summary, os.path.join(root, "metrics.json"))
     if plots:
         records = {k: v.record for k, v in result.variants.items() if v.record is not None}

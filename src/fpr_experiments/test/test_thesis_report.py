@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import pytest
 from fpr_experiments.catalog import experiment_from_dict, load_experiment
@@ -77,6 +78,27 @@ def test_experiment_report_json_results_markdown_and_claims(tmp_path):
     assert "PD ⚠" in text and "do not edit by hand" in text
     table = report.format_experiment_table(experiment, summary)
     assert "thesis 4.60" in table and "CHECKS FAILED" in table
+
+
+def test_the_cameras_are_stated_without_plots_too(tmp_path):
+    """Without plots the runner keeps no flight record; the experiment's metrics.json and results.md still say
+    which cameras flew (from the variant's own metrics.json), not a blank."""
+    from dataclasses import replace
+
+    experiment = experiment_from_dict({
+        "id": "table_3_2", "title": "hover", "thesis": "Table 3.2", "scenario": "ground_start",
+        "script": "integration_flight", "duration": 10.0,
+        "variants": [{"id": "impedance", "label": "Impedance", "thesis_row": "Impedance"}],
+        "metrics": [{"metric": "roll_rmse_deg", "table": "3.2", "column": "RMSE phi_p (roll)", "label": "roll"}]})
+    result = _result(tmp_path, experiment, {"impedance": {"roll_rmse_deg": 0.2}})
+    result.variants["impedance"] = replace(result.variants["impedance"], record=None)
+    os.makedirs(tmp_path / "impedance")
+    (tmp_path / "impedance" / "metrics.json").write_text(json.dumps({"cameras": "images"}))
+    summary = report.write_experiment_report(experiment, result, str(tmp_path), plots=False)
+    assert summary["cameras"] == "images"
+    assert json.loads((tmp_path / "metrics.json").read_text())["cameras"] == "images"
+    text = report.results_markdown([summary], {"table_3_2": experiment}, "ros2 run fpr_experiments run all")
+    assert "Run: one process, images cameras" in text
 
 
 def test_plots_of_a_synthetic_flight(tmp_path):
