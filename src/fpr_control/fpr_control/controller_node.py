@@ -81,6 +81,10 @@ class ControllerNode(Node):
         motion_capture_topic = d("motion_capture_topic", "/fpr/motion_capture", (
             "fpr_msgs/FprState the ground-truth modes fly on: the simulator's (or a MOCAP bridge's) motion capture; "
             "/fpr/ground_truth is the simulator's exact truth"))
+        self.motion_capture_timeout = d("motion_capture_timeout", 0.25, (
+            "[s] ground-truth modes: motion capture older than this is stale -> hold, and ControllerStatus."
+            "local_state_valid false (the swarm guard's emergency); the simulator's runs at 100 Hz"),
+            low=0.01, high=10.0)
         rate = d("rate", 50.0, "control rate [Hz]", low=1.0, high=1000.0)
         info_timeout = dyn("info_timeout", 0.2, "[s] a peer's zeta older than this -> fallback to NC",
                            lambda v: self.controller.reconfigure(info_timeout=v), low=0.001, high=10.0)
@@ -269,9 +273,11 @@ class ControllerNode(Node):
         self._imu_yaw: float | None = None
         self._imu_time = -math.inf
         self._ground_truth: GroundTruth | None = None
+        self._ground_truth_time = -math.inf
         self._bridge_state: int | None = None  #: the own px4_bridge's UavStatus.state (None: never heard)
         self._bridge_status_time = -math.inf
         self._flown_said: bool | None = None
+        self._state_valid = False  #: the state this controller flies on is valid (set every tick)
         self.create_timer(self.config.period, self._on_tick)
         self.get_logger().info(
             f"controller uav {uav_id}/{n}: mode {mode}, observer {observer}, state {state_source}, "
@@ -364,7 +370,7 @@ class ControllerNode(Node):
         if not gt.is_finite():
             self.get_logger().warning("FprState contains NaN/inf: ignored", **throttle(self, LOG_THROTTLE_S))
             return
-        self._ground_truth = gt
+        self._ground_truth, self._ground_truth_time = gt, self._now()
 
     # ---- control tick ----------------------------------------------------------------------------------
     def _say_fallback(self, active: bool, ages, stamp) -> None:
@@ -415,6 +421,19 @@ class ControllerNode(Node):
             self._flown_said = True
         return flown
 
+    def _fresh_ground_truth(self, now: float) -> GroundTruth | None:
+        """The motion capture if it is at most ``motion_capture_timeout`` old (ground-truth modes), else None: the
+        controller then holds ("no valid ground truth") and says so; None in the local modes."""
+        if not self.controller.uses_ground_truth:
+            return None
+        if self._ground_truth is not None and now - self._ground_truth_time > self.motion_capture_timeout:
+            self.get_logger().warning(
+                f"motion capture stale: the last FprState is {now - self._ground_truth_time:.2f} s old "
+                f"(motion_capture_timeout {self.motion_capture_timeout} s): holding, state reported invalid",
+                **throttle(self, LOG_THROTTLE_S))
+            return None
+        return self._ground_truth
+
     def _on_tick(self) -> None:
         now = self._now()
         local = self._local if now - self._local_time <= self.local_timeout else None
@@ -434,7 +453,12 @@ class ControllerNode(Node):
             self.get_logger().warning("no TeleopCommand: zero velocities, holding the configuration",
                                       **throttle(self, LOG_THROTTLE_S))
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
-        out = self.controller.step(now, local, command, self._ground_truth, imu_yaw, flown=self._flown(now))
+        ground_truth = self._fresh_ground_truth(now)
+        out = self.controller.step(now, local, command, ground_truth, imu_yaw, flown=self._flown(now))
+        # the state this controller flies on: its LocalState, or in the ground-truth modes the motion capture (an
+        # unused onboard estimator going blind must not land a centralized flight; a dead motion capture must)
+        self._state_valid = (ground_truth is not None) if self.controller.uses_ground_truth else \
+            bool(out.local_state_valid)
         if out.warning and not self._had_local and not self.controller.uses_ground_truth:
             self.get_logger().info(out.warning + " (start-up)", **throttle(self, LOG_THROTTLE_S))
         elif out.warning:
@@ -457,7 +481,7 @@ class ControllerNode(Node):
             aw, ax, ay, az = (float(v) for v in out.info.attitude)
             info.attitude.w, info.attitude.x, info.attitude.y, info.attitude.z = aw, ax, ay, az
             info.thrust = float(out.info.thrust)
-            info.valid = bool(out.local_state_valid or self.controller.uses_ground_truth)
+            info.valid = self._state_valid
             self.info_pub.publish(info)
             self.controller.information.note_own_publication()  # the own writer's sequence number (own echo)
 
@@ -477,7 +501,7 @@ class ControllerNode(Node):
         st.info_ages = [float(a) for a in out.info_ages]  # inf: never received
         self._say_fallback(bool(out.fallback_active), out.info_ages, stamp)
         st.thrust_saturated, st.tilt_saturated = bool(out.thrust_saturated), bool(out.tilt_saturated)
-        st.local_state_valid = bool(out.local_state_valid)
+        st.local_state_valid = self._state_valid  # ground-truth modes: the motion capture is fresh
         st.loop_time = float(out.loop_time)
         desired = out.desired
         if desired is None:  # no successful control step yet
@@ -503,8 +527,9 @@ class ControllerNode(Node):
             return
         self._next_diagnostics = now + 1.0
         stale = [j + 1 for j, age in enumerate(out.info_ages) if age > self.config.info_timeout]
-        if not (out.local_state_valid or self.controller.uses_ground_truth):
-            level, message = WARN, "no valid local state: holding"
+        if not self._state_valid:
+            level, message = WARN, ("motion capture stale: holding" if self.controller.uses_ground_truth
+                                    else "no valid local state: holding")
         elif out.fallback_active:
             level, message = WARN, f"NC fallback (4.32): no fresh zeta from UAV {', '.join(map(str, stale))}"
         elif out.thrust_saturated or out.tilt_saturated:

@@ -160,7 +160,8 @@ def test_controller_node_fallback_and_bad_input():
 
 def test_controller_node_reports_the_centralized_desired_state():
     """Ground truth (F0): desired_position starts at the platform position and integrates the commanded F_Fp
-    velocity (Rz(ψ) Fp v^d, ψ = 0 here); yaw from the ground truth; frame "world"."""
+    velocity (Rz(ψ) Fp v^d, ψ = 0 here); yaw from the ground truth; frame "world". The status's state validity is
+    the motion capture's freshness."""
     graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
         Parameter("uav_id", value=1), Parameter("mode", value="centralized")])
     try:
@@ -194,7 +195,12 @@ def test_controller_node_reports_the_centralized_desired_state():
         assert st.desired_position.z == pytest.approx(1.0, abs=1e-9)
         assert (st.desired_roll, st.desired_yaw) == pytest.approx((0.03, 0.0), abs=1e-12)
         assert list(st.desired_leg_angles) == pytest.approx([0.8] * 3)
+        # the state it flies on is the motion capture: valid although no LocalState ever came (an unused onboard
+        # estimator going blind must not trigger the swarm guard) ...
+        assert st.local_state_valid
         helper.destroy_timer(timer)
+        # ... and a motion capture that stops is reported (motion_capture_timeout 0.25 s): the guard's emergency
+        assert wait_for(lambda: not statuses[-1].local_state_valid, timeout=3.0)
     finally:
         graph.close()
 

@@ -102,7 +102,8 @@ _PARAMETERS = {
                                 "controller for the swarm guard)"),
     "peer_status_topic": ("/fpr/uav{uav}/status", "UavStatus topic of UAV {uav} (the peers' bridges)"),
     "estimate_deadline": Param(0.15, "[s] own controller_status without a valid local state this long: emergency "
-                               "(pose estimator dead or blind)", low=0.02, high=60.0),
+                               "(pose estimator, or a ground-truth mode's motion capture, dead or blind)", low=0.02,
+                               high=60.0),
     "peer_status_deadline": Param(0.5, "[s] a peer's status this old while its zeta arrives: its bridge died: "
                                   "emergency", low=0.05, high=60.0),
     "peer_silence_deadline": Param(5.0, "[s] neither status nor zeta from a peer this long: emergency (longer than "

@@ -242,7 +242,8 @@ class SwarmGuard:
                 return Verdict(Cause.ESTIMATE, f"own controller silent for {status_age:.2f} s (controller dead or "
                                                "hung)")
             return Verdict(Cause.ESTIMATE, f"own controller without a valid local state for {now - last_valid:.2f} "
-                                           "s (pose estimator dead or blind)")
+                                           "s (pose estimator, or the motion capture of a ground-truth mode, "
+                                           "dead or blind)")
         for uav_id in sorted(self.peers):
             peer = self.peers[uav_id]
             reason = self._peer_reason(uav_id, peer, now)
