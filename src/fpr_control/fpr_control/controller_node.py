@@ -421,18 +421,18 @@ class ControllerNode(Node):
             self._flown_said = True
         return flown
 
-    def _fresh_ground_truth(self, now: float) -> GroundTruth | None:
-        """The motion capture if it is at most ``motion_capture_timeout`` old (ground-truth modes), else None: the
-        controller then holds ("no valid ground truth") and says so; None in the local modes."""
+    def _fresh_ground_truth(self, now: float) -> tuple[GroundTruth | None, str]:
+        """The motion capture if it is at most ``motion_capture_timeout`` old (ground-truth modes), else None and why:
+        the controller then holds ("no valid ground truth"), and the tick logs that with the reason in one line;
+        (None, "") in the local modes."""
         if not self.controller.uses_ground_truth:
-            return None
-        if self._ground_truth is not None and now - self._ground_truth_time > self.motion_capture_timeout:
-            self.get_logger().warning(
-                f"motion capture stale: the last FprState is {now - self._ground_truth_time:.2f} s old "
-                f"(motion_capture_timeout {self.motion_capture_timeout} s): holding, state reported invalid",
-                **throttle(self, LOG_THROTTLE_S))
-            return None
-        return self._ground_truth
+            return None, ""
+        if self._ground_truth is None:
+            return None, "no FprState (motion capture) received yet"
+        if now - self._ground_truth_time > self.motion_capture_timeout:
+            return None, (f"motion capture stale, the last FprState is {now - self._ground_truth_time:.2f} s old "
+                          f"(motion_capture_timeout {self.motion_capture_timeout} s): holding, state reported invalid")
+        return self._ground_truth, ""
 
     def _on_tick(self) -> None:
         now = self._now()
@@ -453,7 +453,7 @@ class ControllerNode(Node):
             self.get_logger().warning("no TeleopCommand: zero velocities, holding the configuration",
                                       **throttle(self, LOG_THROTTLE_S))
         imu_yaw = self._imu_yaw if now - self._imu_time <= self.imu_timeout else None
-        ground_truth = self._fresh_ground_truth(now)
+        ground_truth, ground_truth_missing = self._fresh_ground_truth(now)
         out = self.controller.step(now, local, command, ground_truth, imu_yaw, flown=self._flown(now))
         # the state this controller flies on: its LocalState, or in the ground-truth modes the motion capture (an
         # unused onboard estimator going blind must not land a centralized flight; a dead motion capture must)
@@ -462,7 +462,8 @@ class ControllerNode(Node):
         if out.warning and not self._had_local and not self.controller.uses_ground_truth:
             self.get_logger().info(out.warning + " (start-up)", **throttle(self, LOG_THROTTLE_S))
         elif out.warning:
-            self.get_logger().warning(out.warning, **throttle(self, LOG_THROTTLE_S))
+            reason = f": {ground_truth_missing}" if ground_truth_missing else ""
+            self.get_logger().warning(out.warning + reason, **throttle(self, LOG_THROTTLE_S))
         stamp = self.get_clock().now().to_msg()
         uav_id = self.config.uav_id
 
