@@ -37,6 +37,7 @@ setup(
             'pilot = fpr_experiments.pilot_node:main',
             'info_link = fpr_experiments.info_link_node:main',
             'calibrate = fpr_experiments.calibration:main',
+            'spread = fpr_experiments.spread:main',
             'faults = fpr_experiments.faults:main',
             'security_policy = fpr_experiments.security:main',
         ],
