@@ -375,7 +375,7 @@ class Environment:
             return np.zeros(3), 0.0
         offset = point - self.board_point
         depth = -float(offset @ self.board_normal)
-        if depth <= 0.0:
+        if depth <= 0.0 or depth > self.board.contact_depth:  # in front of the face, or behind the board
             return np.zeros(3), 0.0
         if not (abs(float(offset @ self.board_u)) <= self.board_half_size[0]
                 and abs(float(offset @ self.board_v)) <= self.board_half_size[1]):
@@ -397,7 +397,7 @@ class Environment:
         b0, b1, b2 = self._board_point
         o0, o1, o2 = point[0] - b0, point[1] - b1, point[2] - b2
         depth = -(o0 * n0 + o1 * n1 + o2 * n2)
-        if depth <= 0.0:
+        if depth <= 0.0 or depth > board.contact_depth:  # in front of the face, or behind the board
             return (0.0, 0.0, 0.0), 0.0
         if self._board_bounded:
             u0, u1, u2 = self._board_u

@@ -417,3 +417,56 @@ def test_compiled_plant_step_matches_the_reference_across_a_board_edge():
     assert (contact[:30] == 0.0).all() and contact[50:].max() > 1.0  # over the board from x = 0.02 m (40 ms)
     truth = [p.ground_truth() for p in plants]
     assert np.allclose(truth[1].external_wrench, truth[0].external_wrench, atol=1e-8)
+
+
+def test_board_contact_only_within_its_contact_depth():
+    """An end-effector pressed into the face is pushed out; one behind the board (deeper than
+    ``BoardConfig.contact_depth``, e.g. after passing beside it and coming back over it) feels nothing — before, the
+    whole prism behind the rectangle pushed out through the face: 35 cm behind it, a 1,750 N force. Both versions;
+    ``inf`` keeps the former prism."""
+    board = {"enabled": True, "point": [0.0, 0.0, 2.1], "normal": [0.0, 0.0, -1.0], "size": [0.3, 0.3]}
+    env = Environment(scenario_from_dict({"board": board}))
+    assert env.board.contact_depth == 0.05
+    velocity = np.array([0.0, 0.0, 0.0])
+    for depth, expected in ((0.002, 10.0), (0.049, 245.0), (0.051, 0.0), (0.35, 0.0)):
+        point = np.array([0.05, -0.05, 2.1 + depth])
+        force, normal = env.board_force(point, velocity)
+        force_s, normal_s = env.board_force_scalar(tuple(point), tuple(velocity))
+        assert normal == pytest.approx(expected) and normal_s == pytest.approx(expected), depth
+        assert np.allclose(force_s, force, atol=1e-12)
+    prism = Environment(scenario_from_dict({"board": {**board, "contact_depth": ".inf"}}))
+    assert prism.board_force(np.array([0.05, -0.05, 2.45]), velocity)[1] == pytest.approx(1750.0)
+    for bad in (0.0, -0.01):
+        with pytest.raises(ValueError, match="board.contact_depth"):
+            scenario_from_dict({"board": {**board, "contact_depth": bad}})
+
+
+def test_compiled_plant_ignores_a_board_it_is_behind():
+    """The C kernel reads ``contact_depth`` too: the end-effector, ~35 cm behind the board's plane, slides over
+    the rectangle from beside it: no contact in either version; with ``contact_depth: inf`` (the former prism) the
+    same flight meets a force of hundreds of newtons."""
+    _require_compiled()
+
+    def contact_forces(contact_depth) -> list[tuple[float, float]]:
+        scenario = {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
+                    "board": {"enabled": True, "point": [0.17, 0.0, 1.2], "normal": [0.0, 0.0, -1.0],
+                              "size": [0.3, 0.3], "edge": [1.0, 0.0, 0.0], "contact_depth": contact_depth}}
+        plants = [Plant(scenario_from_dict(scenario), kernel=k) for k in ("python", "compiled")]
+        state = plants[0].state
+        state.velocity = np.array([0.5, 0.0, 0.0])
+        command = AttitudeCommand(plants[0].fleet.quat, np.full(plants[0].n, 0.45), np.ones(plants[0].n, dtype=bool))
+        for plant in plants:
+            plant.set_state(state)
+            plant.set_command(command)
+        forces = []
+        for _ in range(60):
+            for plant in plants:
+                plant.step()
+            forces.append((plants[0]._contact_force, plants[1]._contact_force))
+            assert np.allclose(plants[1]._x, plants[0]._x, rtol=1e-9, atol=1e-9)
+        return forces
+
+    assert all(python == 0.0 and compiled == 0.0 for python, compiled in contact_forces(0.05))
+    prism = contact_forces(".inf")
+    assert max(python for python, _ in prism) > 300.0
+    assert all(compiled == pytest.approx(python, abs=1e-6) for python, compiled in prism)

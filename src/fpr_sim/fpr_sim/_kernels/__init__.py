@@ -41,7 +41,7 @@ __all__ = ["KERNEL_CHOICES", "KERNEL_ENV", "KernelStatus", "PlantKernel", "QuadK
 KERNEL_ENV = "FPR_SIM_KERNEL"
 KERNEL_CHOICES = ("auto", "compiled", "python")
 #: must equal FPR_KERNEL_ABI in plant_kernel.c
-_ABI = 4
+_ABI = 5
 _LIBRARY_STEM = "_fpr_plant_kernel"
 _SOURCE = Path(__file__).with_name("plant_kernel.c")
 _LOG = logging.getLogger("fpr_sim.kernels")
@@ -96,6 +96,7 @@ def _plant_model_type(max_n: int) -> type[ctypes.Structure]:
                     ("board_normal", vec), ("board_point", vec), ("board_stiffness", ctypes.c_double),
                     ("board_damping", ctypes.c_double), ("board_friction", ctypes.c_double),
                     ("board_u", vec), ("board_v", vec), ("board_half_size", ctypes.c_double * 2),
+                    ("board_contact_depth", ctypes.c_double),
                     ("end_effector", vec), ("joint_stops_enabled", ctypes.c_int),
                     ("joint_stop_lower", ctypes.c_double), ("joint_stop_upper", ctypes.c_double),
                     ("joint_stop_stiffness", ctypes.c_double), ("joint_stop_damping", ctypes.c_double),
@@ -442,6 +443,7 @@ class PlantKernel:
         _fill(model.board_u, env._board_u)
         _fill(model.board_v, env._board_v)
         _fill(model.board_half_size, env.board_half_size)
+        model.board_contact_depth = float(board.contact_depth)
         _fill(model.end_effector, plant._end_effector)
         stops = plant._joint_stops
         model.joint_stops_enabled = int(stops is not None)

@@ -28,7 +28,7 @@
 #endif
 
 /* Bumped whenever a struct, a buffer layout or a function signature changes (checked by the loader). */
-#define FPR_KERNEL_ABI 4
+#define FPR_KERNEL_ABI 5
 #define FPR_MAX_N 16
 #define FPR_MAX_N9 (6 + FPR_MAX_N)
 /* math.pi (M_PI is not C99) */
@@ -83,6 +83,7 @@ typedef struct {
     double board_stiffness, board_damping, board_friction;
     double board_u[3], board_v[3];    /* in-plane unit axes of the board's rectangle (world) */
     double board_half_size[2];        /* half side lengths along board_u, board_v [m] (inf: unbounded) */
+    double board_contact_depth;       /* deepest penetration still in contact [m] (BoardConfig.contact_depth) */
     double end_effector[3];           /* in Fp [m] */
     int joint_stops_enabled;          /* legs' mechanical stops (JointStopConfig) */
     double joint_stop_lower, joint_stop_upper;  /* [rad] */
@@ -423,7 +424,7 @@ static double board_force(const FprPlantModel *m, const double *point, const dou
     o1 = point[1] - bp[1];
     o2 = point[2] - bp[2];
     depth = -(o0 * nv[0] + o1 * nv[1] + o2 * nv[2]);
-    if (depth <= 0.0)
+    if (depth <= 0.0 || depth > m->board_contact_depth)  /* in front of the face, or behind the board */
         return 0.0;
     /* over the board's rectangle only (beside it: no contact) */
     if (!(fabs(o0 * bu[0] + o1 * bu[1] + o2 * bu[2]) <= m->board_half_size[0]
