@@ -8,20 +8,27 @@ assertions on metrics only, never on wall time.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
 
 import pytest
-from fpr_experiments.catalog import experiment_names, load_experiment
+from fpr_experiments.catalog import DEFAULT_REALISM, experiment_names, load_experiment
 from fpr_experiments.runner import run_experiment
+
+#: the graph-regression flights fly the ideal profile by name (issue 11: "ideal kept for unit-level tests"); the
+#: experiments' default, hardware, is validated by docs/results.md and docs/seed_spread.md (some of its full
+#: flights fail their checks there, on purpose: the simulator is as hard to fly as the robot), and here by the demo
+REGRESSION_REALISM = "ideal"
 
 
 @pytest.mark.parametrize("name", experiment_names())
 def test_experiment_runs_quick_and_passes_its_checks(name, tmp_path):
     experiment = load_experiment(name)
     variants = experiment.quick_variants or None
-    result = run_experiment(name, quick=True, variants=variants, output_root=str(tmp_path), plots=False)
+    result = run_experiment(name, quick=True, variants=variants, output_root=str(tmp_path), plots=False,
+                            realism=REGRESSION_REALISM)
     assert set(result.variants) == set(variants or [v.id for v in experiment.variants])
     for variant_id, variant in result.variants.items():
         failed = [c.text() for c in variant.checks if not c.passed]
@@ -32,6 +39,20 @@ def test_experiment_runs_quick_and_passes_its_checks(name, tmp_path):
         assert_mcap_shows_the_robot_in_3d(os.path.join(variant.report_dir, "flight.mcap"))
         assert all(math.isfinite(variant.metrics[m]) for m in ("max_abs_roll_deg", "max_height_m"))
     assert os.path.exists(os.path.join(result.report_dir, "metrics.json"))
+
+
+def test_the_demo_flies_the_default_hardware_profile_and_passes_its_checks(tmp_path):
+    """The demo (scripts/run_demo.sh: takeoff_landing) flies the experiments' default profile, hardware: model
+    mismatch, thrust noise, sensor noise and latency, a lossy link; quick, deterministic (in-process runner)."""
+    assert DEFAULT_REALISM == "hardware" and load_experiment("takeoff_landing").realism == "hardware"
+    result = run_experiment("takeoff_landing", quick=True, output_root=str(tmp_path), plots=False)
+    for variant_id, variant in result.variants.items():
+        failed = [c.text() for c in variant.checks if not c.passed]
+        assert variant.completed and not variant.callback_errors and not failed, f"{variant_id}: {failed}"
+        assert variant.metrics["tracking_time_s"] > 4.0  # it flew
+        with open(os.path.join(variant.report_dir, "metrics.json"), encoding="utf-8") as stream:
+            report = json.load(stream)
+        assert report["realism"]["profile"] == "hardware", report["realism"]
 
 
 def _walk_to_world(parents: dict[str, str], frame: str) -> bool:

@@ -34,7 +34,8 @@ def _message_type(name: str):
 @pytest.fixture(scope="module")
 def probed_flight():
     experiment = load_experiment("takeoff_landing")
-    options = graph_options(experiment, experiment.variants[0], SCENARIOS.resolve(experiment.scenario), "images", 3)
+    options = graph_options(experiment, experiment.variants[0], SCENARIOS.resolve(experiment.scenario), "images", 3,
+                            realism="ideal")  # the QoS of the graph, not the realism (unit-level: issue 11)
     probe_context = rclpy.Context()
     rclpy.init(context=probe_context)
     probe = rclpy.create_node("qos_probe", context=probe_context)

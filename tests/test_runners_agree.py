@@ -27,6 +27,9 @@ from fpr_experiments import run_experiment
 
 EXPERIMENT = "takeoff_landing"
 SEED = 7
+#: the runners are under test here, not the realism: flown on the ideal profile by name (the experiments' default is
+#: hardware; with it this comparison failed on a fresh clone at stop 19, its tolerances being set on ideal flights)
+REALISM = "ideal"
 TOLERANCE = {"max_height_m": 0.05, "roll_rmse_deg": 0.5, "pitch_rmse_deg": 0.5, "legs_rmse_deg": 0.3,
              "vertical_speed_rmse": 0.02, "tracking_time_s": 0.5}
 
@@ -34,9 +37,10 @@ TOLERANCE = {"max_height_m": 0.05, "roll_rmse_deg": 0.5, "pitch_rmse_deg": 0.5, 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     root = str(tmp_path_factory.mktemp("reports"))
-    one = run_experiment(EXPERIMENT, seed=SEED, quick=True, output_root=os.path.join(root, "one"), plots=False)
+    one = run_experiment(EXPERIMENT, seed=SEED, quick=True, output_root=os.path.join(root, "one"), plots=False,
+                         realism=REALISM)
     many = run_experiment(EXPERIMENT, seed=SEED, quick=True, processes=True, real_time_factor=0.5,
-                          output_root=os.path.join(root, "many"), plots=False)
+                          output_root=os.path.join(root, "many"), plots=False, realism=REALISM)
     return one.variants["communicating"], many.variants["communicating"]
 
 

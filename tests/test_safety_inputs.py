@@ -140,7 +140,8 @@ def node_log(flight, tmp_path_factory) -> str:
 def _fly():
     experiment = load_experiment(EXPERIMENT)
     variant = experiment.variants[0]
-    options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3)
+    options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3,
+                            realism="ideal")  # the nodes' input guards under test, on the plant they model exactly
     options = dataclasses.replace(options, info_link=False)  # the hover of comm_loss, without its link outage
     specs = describe_graph(options)
     with InProcessGraph(specs, recorded_topics(3)) as swarm:

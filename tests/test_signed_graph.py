@@ -35,7 +35,8 @@ def signed_flight(tmp_path_factory):
     key_file.write_text("5a" * 32 + "\n")
     experiment = load_experiment("takeoff_landing")
     variant = experiment.variants[0]
-    options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3)
+    options = graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3,
+                            realism="ideal")  # MAVLink signing under test, not the realism (unit-level: issue 11)
     options = dataclasses.replace(options, signing_key_file=str(key_file))
     specs = describe_graph(options)
     assert all(spec.parameters.get("signing_key_file") == str(key_file) for spec in specs
