@@ -390,13 +390,11 @@ def test_compiled_plant_step_matches_the_reference_in_the_joint_stops():
     assert np.isfinite(plants[0]._x).all()
 
 
-def test_compiled_plant_step_matches_the_reference_across_a_board_edge():
-    """The end-effector point starts beside a finite board, behind its plane, and slides over it: no contact
-    first (an unbounded board would push at once), then contact; Python and C side by side."""
-    _require_compiled()
-    scenario = {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
-                "board": {"enabled": True, "point": [0.17, 0.0, 1.548], "normal": [0.0, 0.0, -1.0],
-                          "size": [0.3, 0.3], "edge": [1.0, 0.0, 0.0]}}
+def _plants_sliding_towards_a_board(board: dict) -> list[Plant]:
+    """Python and compiled plants hovering at 0.8 rad legs, moving +x at 0.5 m/s towards a 30 × 30 cm board
+    facing down (``board`` overrides its keys), the same state and command in both."""
+    board = {"enabled": True, "normal": [0.0, 0.0, -1.0], "size": [0.3, 0.3], "edge": [1.0, 0.0, 0.0], **board}
+    scenario = {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False}, "board": board}
     plants = [Plant(scenario_from_dict(scenario), kernel=k) for k in ("python", "compiled")]
     state = plants[0].state
     state.velocity = np.array([0.5, 0.0, 0.0])
@@ -405,6 +403,14 @@ def test_compiled_plant_step_matches_the_reference_across_a_board_edge():
     for plant in plants:
         plant.set_state(state)
         plant.set_command(command)
+    return plants
+
+
+def test_compiled_plant_step_matches_the_reference_across_a_board_edge():
+    """The end-effector point starts beside a finite board, behind its plane, and slides over it: no contact
+    first (an unbounded board would push at once), then contact; Python and C side by side."""
+    _require_compiled()
+    plants = _plants_sliding_towards_a_board({"point": [0.17, 0.0, 1.548]})
     contact = []
     for k in range(120):
         for plant in plants:
@@ -448,16 +454,7 @@ def test_compiled_plant_ignores_a_board_it_is_behind():
     _require_compiled()
 
     def contact_forces(contact_depth) -> list[tuple[float, float]]:
-        scenario = {"initial_state": {"mode": "hover", "leg_angles": 0.8}, "ground": {"enabled": False},
-                    "board": {"enabled": True, "point": [0.17, 0.0, 1.2], "normal": [0.0, 0.0, -1.0],
-                              "size": [0.3, 0.3], "edge": [1.0, 0.0, 0.0], "contact_depth": contact_depth}}
-        plants = [Plant(scenario_from_dict(scenario), kernel=k) for k in ("python", "compiled")]
-        state = plants[0].state
-        state.velocity = np.array([0.5, 0.0, 0.0])
-        command = AttitudeCommand(plants[0].fleet.quat, np.full(plants[0].n, 0.45), np.ones(plants[0].n, dtype=bool))
-        for plant in plants:
-            plant.set_state(state)
-            plant.set_command(command)
+        plants = _plants_sliding_towards_a_board({"point": [0.17, 0.0, 1.2], "contact_depth": contact_depth})
         forces = []
         for _ in range(60):
             for plant in plants:
