@@ -5,9 +5,19 @@ Tables 4.6-4.8) by pure teleoperation, "eye-to-platform", and in §4.4.2 Scenari
 speed and the contact force while law (4.39) gave the rest. :class:`Pilot` stands in for that operator: it looks
 at the platform (the motion capture stands in for the operator's eyes) with a reaction delay and a position
 estimate error, decides a stick position ``update_period`` times a second with a proportional law on the
-position error (expressed in the platform's flat frame F_Fp, the frame of the velocity commands (4.25)), adds a
-tremor, and outputs gamepad axes through the same mapping as a person (config/teleop.yaml: its dead zones apply
-to the pilot as to a human — the thesis notes the large dead zone hampers fine control, l.6780).
+position error (expressed in the platform's flat frame F_Fp, the frame of the velocity commands (4.25)) plus a
+slow trim near the target, adds a tremor, and outputs gamepad axes through the same mapping as a person
+(config/teleop.yaml: its dead zones apply to the pilot as to a human — the thesis notes the large dead zone hampers
+fine control, l.6780).
+
+The trim is the integral of the position error while P is within ``trim_zone`` of the target (a person who sees
+the platform hang 10 cm low holds the stick further up until it climbs; far away they just fly at their own
+speed), bounded to ``trim_limit`` and frozen while the asked speed is at ``max_speed`` (no wind-up). It is off by
+default (a pure P law: holding a point within 15-20 cm, Tables 4.2 and 4.6) and on in the precise-positioning
+script of Table 4.3 (ch4_tennis), whose operator's whole job is to null the last centimetres: the decentralized
+controllers of Table 4.1 have no position integral (Kp and Ki '*' for p_p), so with the hardware profile's thrust
+deficit a P-only operator left the platform where the asked climb speed equalled the sag, 8-10 cm below every
+tennis ball, and no task could succeed (0/7 for both controllers).
 
 A pilot script is a joy script (``keyframes``: buttons and scripted axes, fpr_control.joy_timeline) plus::
 
@@ -57,7 +67,19 @@ class PilotConfig:
     max_speed: float = 0.3          #: [m/s] the operator's own speed limit
     perception_noise: float = 0.01  #: [m] 1σ per axis of the operator's position estimate, per decision
     stick_noise: float = 0.03       #: 1σ tremor, fraction of the full stick travel, per decision
+    trim_gain: float = 0.0          #: [1/s²] trim speed added per metre·second of position error (0: a pure P law)
+    trim_limit: float = 0.15        #: [m/s] bound of the trim, per axis
+    trim_zone: float = 0.3          #: [m] the trim integrates only while the 3-D error is below this
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("reaction_delay", "update_period", "horizontal_gain", "vertical_gain", "max_speed",
+                     "perception_noise", "stick_noise", "trim_gain", "trim_limit", "trim_zone"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"pilot {name} must be finite and >= 0, got {value}")
+        if self.update_period <= 0.0:
+            raise ValueError(f"pilot update_period must be > 0, got {self.update_period}")
 
 
 @dataclass(frozen=True)
@@ -173,6 +195,7 @@ class Pilot:
         self._events: list[dict] = []
         self._hold_target: np.ndarray | None = None
         self._z_reference: float | None = None
+        self._trim = np.zeros(3)          # [m/s] world frame: the operator's learned stick offset
 
     # ---- inputs / outputs ---------------------------------------------------------------------------
     def observe(self, observation: Observation) -> None:
@@ -265,11 +288,16 @@ class Pilot:
         cos_yaw, sin_yaw = math.cos(seen.yaw), math.sin(seen.yaw)
         error_flat = np.array([cos_yaw * error_world[0] + sin_yaw * error_world[1],
                                -sin_yaw * error_world[0] + cos_yaw * error_world[1], error_world[2]])
+        trim_flat = np.array([cos_yaw * self._trim[0] + sin_yaw * self._trim[1],
+                              -sin_yaw * self._trim[0] + cos_yaw * self._trim[1], self._trim[2]])
         velocity = np.array([c.horizontal_gain * error_flat[0], c.horizontal_gain * error_flat[1],
-                             c.vertical_gain * error_flat[2]])
+                             c.vertical_gain * error_flat[2]]) + trim_flat
         speed = float(np.linalg.norm(velocity))
         if speed > c.max_speed:
             velocity *= c.max_speed / speed
+        elif float(np.linalg.norm(error_world)) < c.trim_zone:
+            self._trim = np.clip(self._trim + c.trim_gain * error_world * c.update_period, -c.trim_limit,
+                                 c.trim_limit)
         for k, name in enumerate(("x", "y", "z")):
             if name in axes:
                 channel = self.channels[_CHANNELS[name]]

@@ -15,8 +15,11 @@ CHANNELS = {"velocity_x": Channel(4, 0.5, minimum=-0.5, maximum=0.5),
 DEAD_ZONE = 0.08
 
 
-def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, contact_height: float = np.inf):
-    """A platform whose velocity in F_Fp is what the sticks ask (the teleop's dead zone, no dynamics)."""
+def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, contact_height: float = np.inf,
+         sag: float = 0.0):
+    """A platform whose velocity in F_Fp is what the sticks ask (the teleop's dead zone, no dynamics), less a
+    steady sink rate ``sag`` [m/s] (a decentralized controller without position integral under a thrust deficit:
+    it tracks the asked climb speed short by the deficit over its damping gain)."""
     position, dt, events, samples = start.astype(float), 0.02, [], []
     for step in range(int(duration / dt)):
         t = step * dt
@@ -32,7 +35,7 @@ def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, con
         flat = np.array([speed("velocity_x"), speed("velocity_y"), speed("velocity_z")])
         world = np.array([np.cos(yaw) * flat[0] - np.sin(yaw) * flat[1], np.sin(yaw) * flat[0] + np.cos(yaw) * flat[1],
                           flat[2]])
-        position = position + world * dt
+        position = position + (world - [0.0, 0.0, sag]) * dt
         if position[2] > contact_height:
             position[2] = contact_height
         events += pilot.take_events()
@@ -48,6 +51,28 @@ def test_goto_tasks_reach_their_targets_and_report_success():
     assert [e["success"] for e in ends] == [True, True]
     assert [e["event"] for e in events if e["task"] == 1][:2] == ["task_start", "criterion_reached"]
     assert np.linalg.norm(final - [-0.3, 0.5, 1.9]) < 0.1  # holds the last target afterwards
+
+
+def test_the_trim_removes_the_steady_error_a_proportional_operator_leaves_under_a_sag():
+    plan = TaskPlan(1.0, 60.0, [Task("hold", target=[0.0, 0.0, 2.0], duration=50.0)])
+    heights = {}
+    for trim_gain in (0.0, 0.5):
+        pilot = Pilot(PilotConfig(seed=5, stick_noise=0.0, perception_noise=0.0, trim_gain=trim_gain), plan, CHANNELS)
+        final, _, _ = _fly(pilot, np.array([0.0, 0.0, 2.0]), 40.0, sag=0.1)
+        heights[trim_gain] = final[2]
+    assert heights[0.0] == pytest.approx(2.0 - 0.1 / 1.0, abs=0.01)  # P only: asked climb 1/s * error = the sag
+    assert heights[0.5] == pytest.approx(2.0, abs=0.01)
+
+
+def test_the_trim_is_bounded_and_the_config_is_checked():
+    plan = TaskPlan(0.0, 60.0, [Task("hold", target=[0.0, 0.0, 2.0], duration=50.0)])
+    pilot = Pilot(PilotConfig(seed=6, stick_noise=0.0, perception_noise=0.0, trim_gain=0.5, trim_limit=0.05),
+                  plan, CHANNELS)
+    final, _, _ = _fly(pilot, np.array([0.0, 0.0, 2.0]), 40.0, sag=0.1)
+    assert final[2] == pytest.approx(2.0 - 0.05, abs=0.01)  # the trim tops out at 0.05 m/s: the rest is P
+    for bad in ({"trim_gain": -1.0}, {"trim_zone": float("nan")}, {"update_period": 0.0}):
+        with pytest.raises(ValueError, match="pilot"):
+            PilotConfig(**bad)
 
 
 def test_an_unreachable_target_times_out_as_a_failure():
