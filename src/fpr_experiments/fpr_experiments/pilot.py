@@ -82,6 +82,13 @@ class PilotConfig:
             raise ValueError(f"pilot update_period must be > 0, got {self.update_period}")
 
 
+def _world_to_flat(vector: np.ndarray, yaw: float) -> np.ndarray:
+    """A world-frame vector in the platform's flat frame F_Fp (rotated by -yaw about z; (4.25)'s frame)."""
+    cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
+    return np.array([cos_yaw * vector[0] + sin_yaw * vector[1], -sin_yaw * vector[0] + cos_yaw * vector[1],
+                     vector[2]])
+
+
 @dataclass(frozen=True)
 class Channel:
     """One gamepad channel of the teleop mapping (fpr_control config/teleop.yaml)."""
@@ -285,13 +292,9 @@ class Pilot:
             return sticks
         estimate = seen.position + rng.normal(0.0, c.perception_noise, 3)
         error_world = self._hold_target - estimate
-        cos_yaw, sin_yaw = math.cos(seen.yaw), math.sin(seen.yaw)
-        error_flat = np.array([cos_yaw * error_world[0] + sin_yaw * error_world[1],
-                               -sin_yaw * error_world[0] + cos_yaw * error_world[1], error_world[2]])
-        trim_flat = np.array([cos_yaw * self._trim[0] + sin_yaw * self._trim[1],
-                              -sin_yaw * self._trim[0] + cos_yaw * self._trim[1], self._trim[2]])
+        error_flat = _world_to_flat(error_world, seen.yaw)
         velocity = np.array([c.horizontal_gain * error_flat[0], c.horizontal_gain * error_flat[1],
-                             c.vertical_gain * error_flat[2]]) + trim_flat
+                             c.vertical_gain * error_flat[2]]) + _world_to_flat(self._trim, seen.yaw)
         speed = float(np.linalg.norm(velocity))
         if speed > c.max_speed:
             velocity *= c.max_speed / speed
