@@ -32,7 +32,8 @@ CASES = {
 }
 #: lever -> (deterministic runner, lean nodes, /clock rate [Hz], realism profile, executor); the first is the
 #: baseline (main before issue 15); the deterministic runner drains with rclpy's executor or the SweepExecutor
-#: (fpr_experiments.sweep_executor; "sweep-copy": one conversion per subscription, as rclpy); "hardware" compares
+#: (fpr_experiments.sweep_executor; "sweep-copy": one conversion per subscription, as rclpy; "sweep-dds": every
+#: message through DDS instead of fpr_experiments.intra_process's in-process delivery); "hardware" compares
 #: the realism profiles on the default runner (issue 11: hardware <= 20 % cost)
 LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", "rclpy"),
           "threaded, lean nodes": (False, True, 250.0, "ideal", "rclpy"),
@@ -44,7 +45,9 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           "default + hardware realism": (True, True, 100.0, "hardware", "sweep"),
           # appended (the indices above stay those of docs/benchmarks.md's commands): the sweep as it was before
           # it converted each message once for all subscribers
-          "sweep, one conversion per subscription": (True, True, 100.0, "ideal", "sweep-copy")}
+          "sweep, one conversion per subscription": (True, True, 100.0, "ideal", "sweep-copy"),
+          # the sweep with every message through DDS (the default before fpr_experiments.intra_process)
+          "sweep, every message through DDS": (True, True, 100.0, "ideal", "sweep-dds")}
 
 
 def _cpu() -> float:

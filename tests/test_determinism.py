@@ -9,7 +9,10 @@ float32, which absorbs such differences (a float32 rounding flip would take a 1e
 one in ten thousand 10 s flights). Flight: the takeoff_landing experiment, first 10 s (arm, fly, OFFBOARD,
 lift-off, climb). The sweep executor's one conversion per message (subscribers share one Python message) changes
 nothing either: the same flight with a conversion per subscription ("sweep-copy", as rclpy does) gives the same
-ground truth.
+ground truth. Nor does the in-process delivery (fpr_experiments.intra_process, the default): the same flight with
+every message through DDS ("sweep-dds") gives the same ground truth, and the loaded flight runs with the delivery's
+check that no message changes after it was published (a publisher reusing its message, a subscriber modifying
+what it received: the run raises).
 """
 
 from __future__ import annotations
@@ -35,11 +38,12 @@ def _burn(stop_at: float) -> None:
         x = (x * 1103515245 + 12345) % 2 ** 31
 
 
-def _fly(executor: str | None = None) -> dict[str, np.ndarray]:
+def _fly(executor: str | None = None, verify_delivery: bool = False) -> dict[str, np.ndarray]:
     experiment = load_experiment("takeoff_landing")
     variant = experiment.variants[0]
     specs = describe_graph(graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3))
-    with InProcessGraph(specs, recorded_topics(3), deterministic=True, executor=executor) as graph:
+    with InProcessGraph(specs, recorded_topics(3), deterministic=True, executor=executor,
+                        verify_delivery=verify_delivery) as graph:
         graph.wait_for_discovery()
         assert graph.run_until(lambda: graph.sim_time >= SECONDS - 1e-9, wall_timeout=300.0)
         assert graph.wait_for_recorder()
@@ -62,7 +66,7 @@ def flights():
         burner.start()
     try:
         start = time.monotonic()
-        loaded = _fly()
+        loaded = _fly(verify_delivery=True)
         print(f"\n[determinism] loaded flight: {SECONDS:.0f} s simulated in {time.monotonic() - start:.1f} s wall "
               f"with {len(burners)} CPU burners", flush=True)
     finally:
@@ -107,3 +111,12 @@ def test_sharing_one_message_among_subscribers_changes_nothing(flights):
         assert np.array_equal(quiet[key], copied[key]), \
             f"{key}: max difference {np.abs(quiet[key] - copied[key]).max()}"
     np.testing.assert_allclose(quiet["setpoints"], copied["setpoints"], rtol=0.0, atol=1e-12)
+
+
+def test_in_process_delivery_changes_nothing(flights):
+    quiet, _ = flights
+    through_dds = _fly(executor="sweep-dds")
+    for key in ("position", "quat", "legs", "thrusts", "uav_positions"):
+        assert np.array_equal(quiet[key], through_dds[key]), \
+            f"{key}: max difference {np.abs(quiet[key] - through_dds[key]).max()}"
+    np.testing.assert_allclose(quiet["setpoints"], through_dds["setpoints"], rtol=0.0, atol=1e-12)

@@ -15,7 +15,9 @@ a condition. Two ways to run the graph:
   scheduling: the same scenario and seed give the same ground truth bit for bit on an idle or a loaded machine
   (tests/test_determinism.py). The drain is done by :class:`~fpr_experiments.sweep_executor.SweepExecutor`
   (``executor="sweep"``, the default with lean nodes; the recorder is swept too, no thread of its own): it polls
-  instead of rebuilding rclpy's wait set at every wait, ×1.5-1.7 real-time factor (docs/benchmarks.md).
+  instead of rebuilding rclpy's wait set at every wait, ×1.5-1.7 real-time factor (docs/benchmarks.md), and
+  delivers the graph's messages in process, without DDS (:mod:`fpr_experiments.intra_process`; the simulator's
+  publishers too): ``executor="sweep-dds"`` sweeps with every message through DDS, as before (same results).
   ``executor="rclpy"`` drains with rclpy's SingleThreadedExecutor (needed for full nodes: their parameter
   services' clients and QoS event handlers are not served by the sweep).
 - threaded: the graph spins in a background executor thread; the simulator's lockstep waits at every 20 ms
@@ -58,21 +60,25 @@ class InProcessGraph:
 
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
-                 real_time_factor: float | None = None) -> None:
-        """``executor``: "sweep", "sweep-copy" (the sweep converting each message once per subscription, as rclpy
-        does, instead of once per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
+                 real_time_factor: float | None = None, verify_delivery: bool = False) -> None:
+        """``executor``: "sweep" (in-process delivery), "sweep-dds" (the sweep with every message through DDS),
+        "sweep-copy" (through DDS, and converting each message once per subscription, as rclpy does, instead of once
+        per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
         sweep for lean nodes, else rclpy); the
         threaded mode always spins rclpy's executor. ``real_time_factor``: the simulator's pacing (0: as fast as
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
-        view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter."""
+        view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter.
+        ``verify_delivery`` (tests): the in-process delivery checks that no message changes after it was published
+        (fpr_experiments.intra_process; it serializes every message, slower)."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
-        if executor not in ("sweep", "sweep-copy", "rclpy"):
-            raise ValueError(f"executor must be 'sweep', 'sweep-copy' or 'rclpy', got {executor!r}")
+        if executor not in ("sweep", "sweep-dds", "sweep-copy", "rclpy"):
+            raise ValueError(f"executor must be 'sweep', 'sweep-dds', 'sweep-copy' or 'rclpy', got {executor!r}")
         if executor != "rclpy" and not deterministic:
             raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
+        self.verify_delivery = verify_delivery
         self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
         if real_time_factor is None and deterministic and live_view is None:
             real_time_factor = 0.0
@@ -97,6 +103,7 @@ class InProcessGraph:
         self._running = True
         self._executor: SingleThreadedExecutor | None = None
         self._sweep: SweepExecutor | None = None
+        self._fallbacks_logged = 0
         self._spinner: threading.Thread | None = None
         try:
             self._build(topics)
@@ -112,14 +119,17 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        sweep = self.executor_kind in ("sweep", "sweep-copy")
+        sweep = self.executor_kind in ("sweep", "sweep-dds", "sweep-copy")
         self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view,
                                  spin=not sweep)
         if sweep:
-            self._sweep = SweepExecutor(share_messages=self.executor_kind == "sweep")
+            self._sweep = SweepExecutor(share_messages=self.executor_kind != "sweep-copy",
+                                        intra_process=self.executor_kind == "sweep", verify=self.verify_delivery)
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)
+            if self.simulator is not None:
+                self._sweep.add_publisher_node(self.simulator)
         else:
             self._executor = SingleThreadedExecutor(context=self.context)
             for node in self.nodes:
@@ -147,7 +157,13 @@ class InProcessGraph:
         """Deterministic mode: run every ready callback of the graph, and what they make ready, to quiescence;
         callback exceptions are kept in :attr:`errors`. Returns the callbacks run."""
         if self._sweep is not None:
-            return self._sweep.drain(self.errors)
+            done = self._sweep.drain(self.errors)
+            router = self._sweep.router
+            if router is not None and len(router.fallbacks) > self._fallbacks_logged:
+                for line in router.fallbacks[self._fallbacks_logged:]:
+                    self._graph_clock_node.get_logger().info(f"in-process delivery: {line}")
+                self._fallbacks_logged = len(router.fallbacks)
+            return done
         return drain_rclpy_executor(self._executor, self.errors)
 
     def _deterministic_step(self) -> None:
@@ -245,6 +261,8 @@ class InProcessGraph:
             self._spinner.join(timeout=5.0)
         if self._executor is not None:
             self._executor.shutdown(timeout_sec=1.0)
+        if self._sweep is not None:
+            self._sweep.close()
         if self.recorder is not None:
             try:
                 self.recorder.stop()

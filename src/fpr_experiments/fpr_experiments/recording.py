@@ -1,5 +1,6 @@
 """Recording a run (rclpy): one :class:`Recorder` node keeps every topic the experiment reports on, serialized
-(raw subscriptions: nothing is deserialized while the simulation runs), in its own executor thread. At the end
+(raw subscriptions: nothing is deserialized while the simulation runs; in the deterministic runner's in-process
+delivery, the published message objects themselves, serialized at the end), in its own executor thread. At the end
 :meth:`Recorder.snapshot` deserializes them once into :class:`Recording` (message lists per topic), which
 :func:`flight_record` turns into the numpy :class:`~fpr_experiments.records.FlightRecord` of the metrics and
 :func:`write_mcap` into ``flight.mcap`` (Foxglove, ``ros2 bag``). Camera images are not recorded (tens of MB per
@@ -19,7 +20,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, Imu, Joy
 from std_msgs.msg import String
@@ -131,11 +132,16 @@ class Recorder(Node):
         return super().create_subscription(*args, event_callbacks=event_callbacks, **kwargs)
 
     def _keep(self, store: list, topic: str):
-        def callback(data: bytes) -> None:
+        def callback(data) -> None:
             with self.lock:
                 store.append(data)
             if self.live_view is not None:
+                if not isinstance(data, bytes):
+                    data = serialize_message(data)
                 self.live_view.log(topic, data, self.get_clock().now().nanoseconds)
+        # the in-process delivery (fpr_experiments.intra_process) may hand over the published message object
+        # instead of its CDR bytes: kept as it is, serialized at the end (snapshot)
+        callback.accepts_messages = True
         return callback
 
     def _spin(self) -> None:
@@ -153,14 +159,22 @@ class Recorder(Node):
             return len(self._data[topic])
 
     def latest(self, topic: str):
-        """The newest message of ``topic`` (deserialized), or None."""
+        """The newest message of ``topic`` (a copy of its own: the caller may change it), or None."""
         with self.lock:
             data = self._data[topic][-1] if self._data[topic] else None
-        return None if data is None else deserialize_message(data, self.topics[topic].msg_type)
+        if data is None:
+            return None
+        if not isinstance(data, bytes):
+            data = serialize_message(data)
+        return deserialize_message(data, self.topics[topic].msg_type)
 
     def latest_time(self, topic: str) -> float | None:
-        msg = self.latest(topic)
-        return None if msg is None else log_time_ns(msg) * 1e-9
+        with self.lock:
+            data = self._data[topic][-1] if self._data[topic] else None
+        if data is None:
+            return None
+        msg = deserialize_message(data, self.topics[topic].msg_type) if isinstance(data, bytes) else data
+        return log_time_ns(msg) * 1e-9
 
     def wait_for_publishers(self, expected: dict[str, int], timeout: float = 20.0) -> None:
         """Until each topic has its number of publishers (discovery), else ``TimeoutError``."""
@@ -184,8 +198,11 @@ class Recorder(Node):
     def snapshot(self) -> Recording:
         with self.lock:
             data = {name: list(items) for name, items in self._data.items()}
-        return Recording({name: [deserialize_message(d, self.topics[name].msg_type) for d in items]
-                          for name, items in data.items()}, data, {n: t.msg_type for n, t in self.topics.items()})
+        messages = {name: [deserialize_message(d, self.topics[name].msg_type) if isinstance(d, bytes) else d
+                           for d in items] for name, items in data.items()}
+        serialized = {name: [d if isinstance(d, bytes) else serialize_message(d) for d in items]
+                      for name, items in data.items()}
+        return Recording(messages, serialized, {n: t.msg_type for n, t in self.topics.items()})
 
     def stop(self) -> None:
         self._running = False

@@ -17,6 +17,10 @@ when something may be ready (right after it stepped the simulator or read MAVLin
   context, so it is taken in the next sweep; a subscription's queued messages go one per sweep (the order rclpy
   gives them too: one take per ready subscription per wait);
 - serves each node's services (Jazzy's type-description service of every node) once per drain, first;
+- delivers the graph's messages in process (:mod:`fpr_experiments.intra_process`, ``intra_process=True``, the
+  default): a publish of a node of the graph appends the serialized message to the queue of each subscription of
+  the graph, without DDS, and the sweep only takes from subscriptions with something queued (DDS serves what
+  comes from outside the graph, what is TRANSIENT_LOCAL and /fpr/info, whose callbacks read DDS's MessageInfo);
 - converts each message into Python once for all of its subscribers in the process: it takes the serialized
   message (a raw take, ~2 µs) and deserializes it once per drain (rclpy's ``deserialize_message``), so the n
   controllers, n bridges and the recorder that read one /fpr/info ζ, and the ~13 TimeSources that read one
@@ -45,8 +49,10 @@ from collections.abc import Callable
 
 from rclpy.executors import Executor, ExternalShutdownException, TimeoutException
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.subscription import Subscription
+
+from fpr_experiments.intra_process import IntraProcessRouter, Route
 
 __all__ = ["SweepExecutor", "UnsupportedEntity", "drain_rclpy_executor"]
 
@@ -63,19 +69,37 @@ class SweepExecutor:
     #: sweeps of one drain before it says the graph does not settle (a callback chain re-triggering itself)
     MAX_SWEEPS = 10_000
 
-    def __init__(self, share_messages: bool = True) -> None:
+    def __init__(self, share_messages: bool = True, intra_process: bool = True, verify: bool = False) -> None:
+        """``share_messages``: one Python message per received message for all subscribers (else one each, as
+        rclpy). ``intra_process``: deliver among the graph's nodes without DDS (:mod:`fpr_experiments.intra_process`;
+        nodes added with :meth:`add_publisher_node` publish in process too; ``verify``: check that no message
+        changes after it was published, IntraProcessRouter)."""
         self.share_messages = share_messages
+        self.router = IntraProcessRouter(verify=verify) if intra_process else None
+        #: nodes whose publishers are routed but whose callbacks somebody else runs (the simulator)
+        self._publisher_nodes: list[Node] = []
         #: this drain's deserialized messages, by (type, serialized bytes): one conversion per message
         self._decoded: dict[tuple[type, bytes], object] = {}
         self._nodes: list[Node] = []
         self._signature: tuple[int, ...] = ()
         #: per node: (timers, subscriptions with how each callback is called, services), in creation order
-        self._entities: list[tuple[list, list[tuple[Subscription, bool]], list]] = []
+        self._entities: list[tuple[list, list[tuple[Subscription, bool, Route | None]], list]] = []
 
     def add_node(self, node: Node) -> None:
         self._check(node)
         self._nodes.append(node)
         self._refresh()
+
+    def add_publisher_node(self, node: Node) -> None:
+        """A node whose callbacks this executor does not run but whose publishers deliver in process (the
+        simulator, which the deterministic runner steps itself)."""
+        self._publisher_nodes.append(node)
+        self._refresh()
+
+    def close(self) -> None:
+        """Give the publishers their own ``publish`` back (before the nodes are destroyed)."""
+        if self.router is not None:
+            self.router.close()
 
     @property
     def nodes(self) -> list[Node]:
@@ -99,15 +123,19 @@ class SweepExecutor:
         # rclpy's Node keeps its entities in these lists (its executors read them through the properties); the
         # lengths tell cheaply whether a node created or destroyed something since the last drain
         # (waitables are name-mangled private: `_Node__waitables`)
-        return tuple(len(lst) for node in self._nodes for lst in (node._timers, node._subscriptions,
-                                                                   node._services, node._clients, node._guards,
-                                                                   node._Node__waitables))
+        return (*(len(lst) for node in self._nodes for lst in (node._timers, node._subscriptions, node._publishers,
+                                                               node._services, node._clients, node._guards,
+                                                               node._Node__waitables)),
+                *(len(node._publishers) for node in self._publisher_nodes))
 
     def _refresh(self) -> None:
         for node in self._nodes:
             self._check(node)
+        if self.router is not None:
+            self.router.build(self._nodes, self._publisher_nodes)
+        route_of = self.router.route_of if self.router is not None else (lambda _: None)
         self._entities = [(list(node.timers),
-                           [(sub, sub._callback_type is Subscription.CallbackType.MessageOnly)
+                           [(sub, sub._callback_type is Subscription.CallbackType.MessageOnly, route_of(sub))
                             for sub in node.subscriptions],
                            list(node.services)) for node in self._nodes]
         self._signature = self._current_signature()
@@ -115,6 +143,8 @@ class SweepExecutor:
     def drain(self, errors: list[str]) -> int:
         if self._current_signature() != self._signature:
             self._refresh()
+        if self.router is not None:
+            self.router.check_outside()
         done = self._serve_services(errors)
         try:
             for _ in range(self.MAX_SWEEPS):
@@ -136,7 +166,14 @@ class SweepExecutor:
                     handle.call_timer()
                     ran += 1
                     _run(timer.callback, (), errors)
-            for subscription, message_only in subscriptions:
+            for subscription, message_only, route in subscriptions:
+                if route is not None:  # in process (message-only callbacks)
+                    item = route.take()
+                    if item is None:
+                        continue
+                    ran += 1
+                    _run(subscription.callback, (self._routed(subscription, route, item),), errors)
+                    continue
                 shared = self.share_messages and not subscription.raw
                 taken = subscription.handle.take_message(subscription.msg_type, shared or subscription.raw)
                 if taken is None:
@@ -146,6 +183,20 @@ class SweepExecutor:
                     taken = (self._message(subscription.msg_type, taken[0]), taken[1])
                 _run(subscription.callback, (taken[0],) if message_only else taken, errors)
         return ran
+
+    def _routed(self, subscription: Subscription, route: Route, item):
+        """What a subscription's callback gets for an in-process queue item (fpr_experiments.intra_process)."""
+        if isinstance(item, bytes):  # from DDS, or published serialized
+            if subscription.raw:
+                return item
+            return (self._message(subscription.msg_type, item) if self.share_messages
+                    else deserialize_message(item, subscription.msg_type))
+        message = self.router.delivered(route, item)
+        if subscription.raw:
+            return message if getattr(subscription.callback, "accepts_messages", False) \
+                else serialize_message(message)
+        return message if self.share_messages else deserialize_message(serialize_message(message),
+                                                                       subscription.msg_type)
 
     def _message(self, msg_type: type, serialized: bytes) -> object:
         """The Python message of ``serialized``, deserialized once per drain for every subscriber."""
