@@ -39,7 +39,10 @@ What it does (:class:`IntraProcessRouter`, driven by :class:`fpr_experiments.swe
   what is queued, then poll DDS again. The DDS copies a routed publisher sent for outside subscribers before that
   moment sit in the in-graph readers' histories too; they are discarded once (they were delivered from the queue
   already), and with them whatever the new outside publisher sent before the check noticed it (one drain).
-  Both checks run at the start of every drain (two C calls per routed endpoint, ~0.3 µs each);
+  Both checks run at the start of every tenth drain (``check_every``; a C call per routed endpoint, ~0.3 µs
+  each, ~3 % of the run when done at every drain): an outside subscriber misses at most that long, as if
+  discovery had taken that much longer; an outside publisher's messages wait in the readers' histories meanwhile
+  (within their depth), except after DDS copies were sent (those are discarded with them);
 - messages published through DDS before routing started (while the graph was built) are taken first.
 
 The order of delivery is DDS's: per subscription first in, first out, one message per sweep, delivered
@@ -86,7 +89,7 @@ class Route:
     """One served subscription of a routed topic: its queue of serialized messages and how many graph publishers
     DDS should match it with (more means one from outside)."""
 
-    __slots__ = ("subscription", "topic", "queue", "graph_publishers", "poll_dds")
+    __slots__ = ("subscription", "topic", "queue", "graph_publishers", "poll_dds", "dds")
 
     def __init__(self, subscription: Subscription, topic: RoutedTopic) -> None:
         self.subscription = subscription
@@ -97,6 +100,9 @@ class Route:
         self.graph_publishers = 0
         #: take from DDS first: what was published through DDS before routing started, until the reader is empty
         self.poll_dds = True
+        #: DDS may hold something for it (leftovers, or the topic went back to DDS): the sweep skips a route with
+        #: neither this nor a queued message without calling :meth:`take`
+        self.dds = True
 
     def take(self):
         """The next message for this subscription (a message object, or CDR bytes when it came through DDS or was
@@ -107,7 +113,7 @@ class Route:
                 taken = handle.take_message(self.subscription.msg_type, True)
                 if taken is not None:
                     return taken[0]
-                self.poll_dds = False
+                self.poll_dds = self.dds = False
             return self.queue.popleft() if self.queue else None
         if self.queue:
             return self.queue.popleft()
@@ -140,10 +146,15 @@ class IntraProcessRouter:
     """See the module doc. :meth:`build` (again whenever the graph's entities change), :meth:`route_of` for the
     sweep, :meth:`check_outside` at the start of every drain, :meth:`close` to give the publishers back."""
 
-    def __init__(self, verify: bool = False) -> None:
-        """``verify``: keep each published message's CDR bytes and check at every delivery that neither the
-        publisher nor an earlier subscriber changed it (:meth:`delivered`; for tests: it serializes everything)."""
+    def __init__(self, verify: bool = False, check_every: int = 10) -> None:
+        """``verify``: keep a copy of each published message and check at every delivery that neither the
+        publisher nor an earlier subscriber changed it (:meth:`delivered`; for tests: it copies everything).
+        ``check_every``: look for endpoints outside the graph at every so many drains (:meth:`check_outside`)."""
+        if check_every < 1:
+            raise ValueError(f"check_every must be >= 1, got {check_every}")
         self.verify = verify
+        self.check_every = check_every
+        self._checks = 0
         self.topics: dict[str, RoutedTopic] = {}
         self._routes: dict[int, Route] = {}  # id(subscription) -> route
         self._publishers: dict[int, _PublisherRoute] = {}  # id(publisher) -> its route
@@ -241,7 +252,11 @@ class IntraProcessRouter:
         return self._routes.get(id(subscription))
 
     def check_outside(self) -> None:
-        """Outside subscribers (publish through DDS too) and outside publishers (back to DDS for good)."""
+        """Outside subscribers (publish through DDS too) and outside publishers (back to DDS for good); called at
+        every drain, it looks at every ``check_every``-th call (the first included)."""
+        self._checks += 1
+        if (self._checks - 1) % self.check_every:
+            return
         for topic in self.topics.values():
             if not topic.routed:
                 continue
@@ -255,6 +270,8 @@ class IntraProcessRouter:
 
     def _fall_back(self, topic: RoutedTopic, reason: str) -> None:
         topic.routed = False
+        for route in topic.routes:
+            route.dds = True
         discarded = 0
         if topic.dds_copies:
             for route in topic.routes:

@@ -69,13 +69,15 @@ class SweepExecutor:
     #: sweeps of one drain before it says the graph does not settle (a callback chain re-triggering itself)
     MAX_SWEEPS = 10_000
 
-    def __init__(self, share_messages: bool = True, intra_process: bool = True, verify: bool = False) -> None:
+    def __init__(self, share_messages: bool = True, intra_process: bool = True, verify: bool = False,
+                 outside_check_every: int = 10) -> None:
         """``share_messages``: one Python message per received message for all subscribers (else one each, as
         rclpy). ``intra_process``: deliver among the graph's nodes without DDS (:mod:`fpr_experiments.intra_process`;
         nodes added with :meth:`add_publisher_node` publish in process too; ``verify``: check that no message
-        changes after it was published, IntraProcessRouter)."""
+        changes after it was published; ``outside_check_every``: drains between two looks for endpoints outside the
+        graph; IntraProcessRouter)."""
         self.share_messages = share_messages
-        self.router = IntraProcessRouter(verify=verify) if intra_process else None
+        self.router = IntraProcessRouter(verify=verify, check_every=outside_check_every) if intra_process else None
         #: nodes whose publishers are routed but whose callbacks somebody else runs (the simulator)
         self._publisher_nodes: list[Node] = []
         #: this drain's deserialized messages, by (type, serialized bytes): one conversion per message
@@ -168,6 +170,8 @@ class SweepExecutor:
                     _run(timer.callback, (), errors)
             for subscription, message_only, route in subscriptions:
                 if route is not None:  # in process (message-only callbacks)
+                    if not route.queue and not route.dds:
+                        continue
                     item = route.take()
                     if item is None:
                         continue

@@ -62,7 +62,7 @@ def _graph(context, topic: str, depth: int = 10, **executor_options):
     received: list = []
     publisher = talker.create_publisher(Int32, topic, 10)
     subscription = listener.create_subscription(Int32, topic, received.append, depth)
-    executor = SweepExecutor(**executor_options)
+    executor = SweepExecutor(outside_check_every=1, **executor_options)
     executor.add_node(talker)
     executor.add_node(listener)
     _wait(lambda: publisher.get_subscription_count() >= 1, "no match")
@@ -203,6 +203,27 @@ def test_verify_catches_a_message_changed_after_publishing(context, request):
     message.data = 2  # reused and changed before the subscriber ran
     with pytest.raises(RuntimeError, match="numbers: the Int32 changed after it was published"):
         executor.drain([])
+
+
+def test_outside_endpoints_are_looked_for_every_check_every_drains(context, request):
+    topic = _topic(request)
+    executor, publisher, received, _ = _graph(context, topic)
+    executor.router.check_every = 3
+    executor.drain([])  # looks (the first drain of the new period)
+    injector = _node("injector", context)
+    outside = injector.create_publisher(Int32, topic, 10)
+    _wait(lambda: outside.get_subscription_count() == 1, "injector not matched")
+    outside.publish(Int32(data=100))
+    executor.drain([])
+    executor.drain([])
+    assert received == [] and executor.router.fallbacks == []  # not looked yet: waits in the reader's history
+    executor.drain([])  # looks: back to DDS, the message is taken
+    assert [m.data for m in received] == [100] and len(executor.router.fallbacks) == 1
+
+
+def test_check_every_must_be_positive():
+    with pytest.raises(ValueError, match="check_every"):
+        SweepExecutor(outside_check_every=0)
 
 
 def test_close_gives_the_publishers_their_own_publish_back(context, request):

@@ -233,6 +233,8 @@ def rotmat_to_quat(R) -> np.ndarray:
     ``(r13 − r31) / (4 q0)`` (E14). The result is normalised, then its sign chosen so that ``w >= 0``.
     """
     R = as_trailing("R", R, (3, 3))
+    if R.ndim == 2:
+        return _rotmat_to_quat_single(R)
     r11, r12, r13 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     r21, r22, r23 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
     r31, r32, r33 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
@@ -253,6 +255,29 @@ def rotmat_to_quat(R) -> np.ndarray:
     chosen = np.take_along_axis(four_qk_q, branch[..., None, None], axis=-2)[..., 0, :]
     q = chosen / np.linalg.norm(chosen, axis=-1, keepdims=True)
     return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def _rotmat_to_quat_single(R: np.ndarray) -> np.ndarray:
+    """:func:`rotmat_to_quat` of one validated (3, 3) matrix in plain floats: the same operations in the same
+    order as the array path, hence the same bits (tested), ~10x faster (the estimators and /tf call it per
+    message). The norm sums the squares in order, as numpy's reduction of 4 elements does."""
+    (r11, r12, r13), (r21, r22, r23), (r31, r32, r33) = R.tolist()
+    diag = (1 + r11 + r22 + r33, 1 + r11 - r22 - r33, 1 - r11 + r22 - r33, 1 - r11 - r22 + r33)
+    branch = max(range(4), key=diag.__getitem__)  # the first largest, as np.argmax
+    if branch == 0:
+        chosen = (diag[0], r32 - r23, r13 - r31, r21 - r12)  # (A.62), E14
+    elif branch == 1:
+        chosen = (r32 - r23, diag[1], r12 + r21, r13 + r31)  # (A.63)
+    elif branch == 2:
+        chosen = (r13 - r31, r12 + r21, diag[2], r23 + r32)  # (A.64)
+    else:
+        chosen = (r21 - r12, r13 + r31, r23 + r32, diag[3])  # (A.65)
+    a, b, c, d = chosen
+    norm = math.sqrt(((a * a + b * b) + c * c) + d * d)
+    q = [a / norm, b / norm, c / norm, d / norm]
+    if q[0] < 0.0:
+        q = [-v for v in q]
+    return np.array(q)
 
 
 def quat_from_axis_angle(axis, angle) -> np.ndarray:

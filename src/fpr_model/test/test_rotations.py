@@ -50,6 +50,21 @@ def test_x1_erratum_e14_q2_component_sign():
     assert np.allclose(rt.rotmat_to_quat(R), q, atol=1e-15)
 
 
+def test_single_matrix_path_gives_the_batched_paths_bits():
+    """rotmat_to_quat of one matrix takes a plain-float path: the same bits as the array path, every branch, ties
+    (the half turns and the identity: several largest diagonal sums) and non-orthonormal input included."""
+    rng = np.random.default_rng(7)
+    R = rt.quat_to_rotmat(_random_quats(20000, seed=5))
+    exact = rt.quat_to_rotmat(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1],
+                                        [0.5, 0.5, 0.5, 0.5], [0, 0.5 ** 0.5, 0.5 ** 0.5, 0]], float))
+    noisy = R[:2000] + 1e-3 * rng.normal(size=(2000, 3, 3))
+    for matrices in (R, exact, noisy):
+        batched = rt.rotmat_to_quat(matrices)
+        single = np.array([rt.rotmat_to_quat(m) for m in matrices])
+        assert np.array_equal(single, batched)
+        assert np.array_equal(np.signbit(single), np.signbit(batched))
+
+
 def test_batched_rotmat_and_quat():
     q = _random_quats(50, seed=3)
     R = rt.quat_to_rotmat(q)
