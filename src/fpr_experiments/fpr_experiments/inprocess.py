@@ -69,7 +69,7 @@ class InProcessGraph:
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
         view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter.
         ``verify_delivery`` (tests): the in-process delivery checks that no message changes after it was published
-        (fpr_experiments.intra_process; it serializes every message, slower)."""
+        (fpr_experiments.intra_process; it copies every message, slower)."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
