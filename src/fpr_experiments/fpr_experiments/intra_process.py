@@ -38,11 +38,11 @@ What it does (:class:`IntraProcessRouter`, driven by :class:`fpr_experiments.swe
   DDS delivery for good, announced in :attr:`IntraProcessRouter.fallbacks` — its served subscriptions then take
   what is queued, then poll DDS again. The DDS copies a routed publisher sent for outside subscribers before that
   moment sit in the in-graph readers' histories too; they are discarded once (they were delivered from the queue
-  already), and with them whatever the new outside publisher sent before the check noticed it (one drain).
-  Both checks run at the start of every tenth drain (``check_every``; a C call per routed endpoint, ~0.3 µs
-  each, ~3 % of the run when done at every drain): an outside subscriber misses at most that long, as if
-  discovery had taken that much longer; an outside publisher's messages wait in the readers' histories meanwhile
-  (within their depth), except after DDS copies were sent (those are discarded with them);
+  already), and with them whatever the new outside publisher sent before the check noticed it. Both checks run
+  at the start of every tenth drain (``check_every``; a C call per routed endpoint, ~0.3 µs each, ~3 % of the run
+  when done at every drain): an outside subscriber misses at most that long, as if discovery had taken that much
+  longer; an outside publisher's messages wait in the readers' histories meanwhile (within their depth), except
+  after DDS copies were sent (those are discarded with them);
 - messages published through DDS before routing started (while the graph was built) are taken first.
 
 The order of delivery is DDS's: per subscription first in, first out, one message per sweep, delivered
