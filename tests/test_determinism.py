@@ -99,6 +99,13 @@ def test_same_setpoints_under_load(flights):
     np.testing.assert_allclose(quiet["setpoints"], loaded["setpoints"], rtol=0.0, atol=1e-12)
 
 
+def _assert_same_flight(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
+    """The same ground truth bit for bit, the same setpoints to 1e-12 (see the module doc)."""
+    for key in ("position", "quat", "legs", "thrusts", "uav_positions"):
+        assert np.array_equal(a[key], b[key]), f"{key}: max difference {np.abs(a[key] - b[key]).max()}"
+    np.testing.assert_allclose(a["setpoints"], b["setpoints"], rtol=0.0, atol=1e-12)
+
+
 def test_the_flight_took_off(flights):
     quiet, _ = flights
     assert quiet["position"][:, 2].max() > quiet["position"][0, 2] + 0.5
@@ -106,17 +113,9 @@ def test_the_flight_took_off(flights):
 
 def test_sharing_one_message_among_subscribers_changes_nothing(flights):
     quiet, _ = flights
-    copied = _fly(executor="sweep-copy")
-    for key in ("position", "quat", "legs", "thrusts", "uav_positions"):
-        assert np.array_equal(quiet[key], copied[key]), \
-            f"{key}: max difference {np.abs(quiet[key] - copied[key]).max()}"
-    np.testing.assert_allclose(quiet["setpoints"], copied["setpoints"], rtol=0.0, atol=1e-12)
+    _assert_same_flight(quiet, _fly(executor="sweep-copy"))
 
 
 def test_in_process_delivery_changes_nothing(flights):
     quiet, _ = flights
-    through_dds = _fly(executor="sweep-dds")
-    for key in ("position", "quat", "legs", "thrusts", "uav_positions"):
-        assert np.array_equal(quiet[key], through_dds[key]), \
-            f"{key}: max difference {np.abs(quiet[key] - through_dds[key]).max()}"
-    np.testing.assert_allclose(quiet["setpoints"], through_dds["setpoints"], rtol=0.0, atol=1e-12)
+    _assert_same_flight(quiet, _fly(executor="sweep-dds"))

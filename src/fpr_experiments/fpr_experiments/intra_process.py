@@ -86,8 +86,8 @@ class RoutedTopic:
 
 
 class Route:
-    """One served subscription of a routed topic: its queue of serialized messages and how many graph publishers
-    DDS should match it with (more means one from outside)."""
+    """One served subscription of a routed topic: its queue of messages and how many graph publishers DDS should
+    match it with (more means one from outside)."""
 
     __slots__ = ("subscription", "topic", "queue", "graph_publishers", "poll_dds", "dds")
 
@@ -95,7 +95,7 @@ class Route:
         self.subscription = subscription
         self.topic = topic
         qos = subscription.qos_profile
-        #: message objects, or CDR bytes (published as bytes); (object, bytes) pairs when the router verifies
+        #: message objects, or CDR bytes (published as bytes); (object, its copy) pairs when the router verifies
         self.queue: deque = deque(maxlen=None if qos.history == HistoryPolicy.KEEP_ALL else max(1, qos.depth))
         self.graph_publishers = 0
         #: take from DDS first: what was published through DDS before routing started, until the reader is empty
@@ -201,8 +201,8 @@ class IntraProcessRouter:
                 self._routes[id(subscription)] = route
             for publisher in pubs:
                 entry = old_publishers.get(id(publisher))
-                if entry is None or entry.publisher is not publisher:
-                    entry = _PublisherRoute(publisher, topic)
+                if entry is None or entry.publisher is not publisher or entry.topic is not topic:
+                    entry = _PublisherRoute(publisher, topic)  # its publish closes over this topic
                     publisher.publish = self._publish_function(entry)
                 entry.targets = [r for r in topic.routes if _compatible(publisher, r.subscription)]
                 topic.publishers.append(entry)

@@ -18,8 +18,8 @@ when something may be ready (right after it stepped the simulator or read MAVLin
   gives them too: one take per ready subscription per wait);
 - serves each node's services (Jazzy's type-description service of every node) once per drain, first;
 - delivers the graph's messages in process (:mod:`fpr_experiments.intra_process`, ``intra_process=True``, the
-  default): a publish of a node of the graph appends the serialized message to the queue of each subscription of
-  the graph, without DDS, and the sweep only takes from subscriptions with something queued (DDS serves what
+  default): a publish of a node of the graph hands the message object to the queue of each subscription of the
+  graph, without DDS, and the sweep only takes from subscriptions with something queued (DDS serves what
   comes from outside the graph, what is TRANSIENT_LOCAL and /fpr/info, whose callbacks read DDS's MessageInfo);
 - converts each message into Python once for all of its subscribers in the process: it takes the serialized
   message (a raw take, ~2 µs) and deserializes it once per drain (rclpy's ``deserialize_message``), so the n
