@@ -34,7 +34,7 @@ class FilterNoise:
     """Process and measurement noise (SI). Densities are per √s; measurement sigmas per axis."""
 
     position_random_walk: float = 0.05  #: [m/√s] unmodelled relative motion (leg angles, platform)
-    attitude_random_walk: float = 0.03  #: [rad/√s] gyro noise + platform rotation
+    attitude_random_walk: float = 0.1  #: [rad/√s] gyro noise + platform rotation (README "Tuning")
     gyro_bias_random_walk: float = 0.002  #: [rad/s/√s] (MEKF with bias estimation only)
     initial_gyro_bias_sigma: float = 0.02  #: [rad/s] (MEKF with bias estimation only)
     measurement_position_sigma: float = 0.02  #: [m] per axis

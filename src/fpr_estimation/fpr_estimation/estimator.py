@@ -6,8 +6,9 @@ clock, so simulated time works). Inputs:
 - :meth:`PoseEstimatorCore.on_imu`: UAV attitude in its local frame F0i and FLU body rate; runs the filter
   prediction (4.10)-(4.13) at the IMU rate;
 - :meth:`PoseEstimatorCore.on_velocity`: FLU body linear velocity (for (4.23));
-- :meth:`PoseEstimatorCore.on_detection`: the marker pose C_T_M; converted to p_T_bi by (4.2)-(4.3), gated, then
-  used for the correction (4.16) (asynchronously, whenever a detection arrives);
+- :meth:`PoseEstimatorCore.on_detection`: the marker pose C_T_M; converted to p_T_bi by (4.2)-(4.3), carried from
+  its capture instant to the filter's time (``latency_compensation``, :mod:`.latency`), gated, then used for the
+  correction (4.16) (asynchronously, whenever a detection arrives);
 - :meth:`PoseEstimatorCore.output`: the 50 Hz snapshot (filtered pose, 1-σ, reconstruction, validity).
 
 Stale: when no detection was accepted for ``stale_timeout`` s the output is flagged invalid, prediction continues.
@@ -54,6 +55,7 @@ from fpr_estimation.gating import (
     evaluate_gate,
     is_rotation,
 )
+from fpr_estimation.latency import AttitudeHistory
 from fpr_estimation.mekf import RelativePoseMEKF
 from fpr_estimation.reconstruction import LocalReconstruction, leg_anchor, reconstruct_local_state
 
@@ -86,6 +88,10 @@ class EstimatorConfig:
     stale_timeout: float = 0.5  #: [s]
     max_prediction_step: float = 0.1  #: [s] longer IMU gaps are not integrated (reported)
     imu_gap_reset: float = 0.5  #: [s] an IMU gap this long resets an initialised filter (0: never)
+    #: carry each detection from its capture stamp to the filter's time with the IMU attitudes (:mod:`.latency`);
+    #: False: applied as if captured at arrival (the thesis's filter)
+    latency_compensation: bool = True
+    latency_horizon: float = 0.5  #: [s] IMU attitudes kept; an older detection is applied uncompensated (said)
 
     def __post_init__(self) -> None:
         if self.filter not in FILTER_KINDS:
@@ -94,6 +100,8 @@ class EstimatorConfig:
             raise ValueError(f"uav_id must be in 1..{self.n}, got {self.uav_id}")
         if not (self.stale_timeout > 0.0 and self.max_prediction_step > 0.0 and self.platform_radius > 0.0):
             raise ValueError("stale_timeout, max_prediction_step and platform_radius must be positive")
+        if not (np.isfinite(self.latency_horizon) and self.latency_horizon > 0.0):
+            raise ValueError(f"latency_horizon must be positive and finite, got {self.latency_horizon}")
         if self.imu_gap_reset != 0.0 and not self.imu_gap_reset >= self.max_prediction_step:
             raise ValueError(f"imu_gap_reset must be 0 (never) or >= max_prediction_step "
                              f"({self.max_prediction_step:g} s), got {self.imu_gap_reset}")
@@ -177,6 +185,10 @@ class PoseEstimatorCore:
         self.imu_gaps = 0  #: IMU gaps longer than max_prediction_step (not integrated)
         self.refused: dict[str, int] = {}  #: refused inputs per kind (imu_rate, detection_distance, ...)
         self.last_gate: GateDecision | None = None
+        self.attitudes = AttitudeHistory(c.latency_horizon)  #: the UAV's attitudes, for the latency compensation
+        self.compensated_detections = 0  #: carried from their capture stamp to the filter's time
+        self.uncompensated_detections = 0  #: older than latency_horizon (or before any IMU sample)
+        self.last_latency = _NAN  #: [s] filter time − capture stamp of the last compensated detection
         self._refusing = {"imu": 0, "velocity": 0, "detection": 0}  # refused in a row, per input
         self._events: deque[GuardEvent] = deque(maxlen=64)
         self._was_valid = False
@@ -219,10 +231,12 @@ class PoseEstimatorCore:
             return self._refuse("imu", refusal)
         self._resume("imu", "IMU samples")
         quaternion = np.asarray(orientation_quat, dtype=float)
-        self.imu_rotation = quat_to_rotmat(quaternion / np.linalg.norm(quaternion))
+        quaternion = quaternion / np.linalg.norm(quaternion)
+        self.imu_rotation = quat_to_rotmat(quaternion)
         self.body_rate = np.asarray(body_rate, dtype=float).copy()
         previous, self.last_imu_time = self.last_imu_time, float(stamp)
         if previous is None:
+            self.attitudes.add(stamp, quaternion)
             return None
         dt = float(stamp) - previous
         if dt == 0.0:
@@ -230,6 +244,9 @@ class PoseEstimatorCore:
         if dt > self.config.max_prediction_step:
             self.imu_gaps += 1
             self.candidates.clear()  # their attitudes cannot be propagated over the gap
+            # nor can a detection captured before it be carried over it as the filter was not (latency): start again
+            self.attitudes.clear()
+            self.attitudes.add(stamp, quaternion)
             reason = (f"IMU gap of {dt:.3g} s (> max_prediction_step {self.config.max_prediction_step:g} s) not "
                       f"integrated: the relative attitude misses that rotation")
             if self.filter.initialized and 0.0 < self.config.imu_gap_reset <= dt:
@@ -237,6 +254,7 @@ class PoseEstimatorCore:
                 reason += "; filter reset"
             self._emit("imu_gap", "warning", reason)
             return reason
+        self.attitudes.add(stamp, quaternion)
         self.candidates.propagate(self.body_rate, dt)
         if self.filter.initialized:
             self.filter.predict(self.body_rate, dt)  # (4.10)-(4.13), (4.15)
@@ -275,10 +293,15 @@ class PoseEstimatorCore:
         if refusal is not None:
             return self._refuse("detection", refusal)
         platform_T_body = relative_pose_from_detection(camera_T_marker, self.calibration)
-        return self.on_relative_pose(stamp, platform_T_body)
+        return self.on_relative_pose(stamp, platform_T_body, capture_stamp)
 
-    def on_relative_pose(self, stamp: float, platform_T_body: np.ndarray) -> GateDecision | str:
-        """A measured p_T_bi (4×4) (from (4.2), or MOCAP-emulated as in thesis §4.4.1) at ``stamp`` [s].
+    def on_relative_pose(self, stamp: float, platform_T_body: np.ndarray,
+                         capture_stamp: float | None = None) -> GateDecision | str:
+        """A measured p_T_bi (4×4) (from (4.2), or MOCAP-emulated as in thesis §4.4.1) received at ``stamp`` [s],
+        captured at ``capture_stamp`` [s] (None: at ``stamp``, no compensation).
+
+        With ``latency_compensation`` the relative attitude is first carried from the capture stamp to the filter's
+        time (the last IMU stamp) by the UAV's rotation in between (:mod:`.latency`; (4.10)-(4.13)'s model).
 
         Not initialised: the detection joins the consistent run and initialises the filter once the run holds K
         (the decision is then accepted, else not accepted with NaN errors). Initialised: gated, then the
@@ -294,7 +317,10 @@ class PoseEstimatorCore:
         self._resume("detection", "detections")
         stamp = float(stamp)
         position = platform_T_body[:3, 3].copy()
-        quaternion = rotmat_to_quat(platform_T_body[:3, :3])
+        rotation = platform_T_body[:3, :3]
+        if self.config.latency_compensation and capture_stamp is not None and _finite(capture_stamp):
+            rotation = self._compensate_latency(float(capture_stamp), rotation)
+        quaternion = rotmat_to_quat(rotation)
         if not self.filter.initialized:
             self.candidates.add(stamp, position, quaternion)
             if self.candidates.ready:
@@ -335,6 +361,24 @@ class PoseEstimatorCore:
                    f"{reinit.min_lost_time:g} s of that and {reinit.consistent_detections} consistent detections, "
                    f"{len(self.candidates)} now)")
         return decision
+
+    def _compensate_latency(self, capture_stamp: float, rotation: np.ndarray) -> np.ndarray:
+        """``p_R_bi(t) = p_R_bi(t_c) · Δ`` with Δ the UAV's rotation from the capture ``t_c`` to the filter's time
+        ``t`` (:meth:`.AttitudeHistory.rotation_since`); the position is kept (ṗ = 0, (4.10))."""
+        latest = self.attitudes.latest_stamp
+        if latest is None:  # no IMU attitude yet: the filter has no time of its own to carry the detection to
+            return rotation
+        delta = self.attitudes.rotation_since(capture_stamp)
+        if delta is None:
+            self.uncompensated_detections += 1
+            self._emit("latency", "warning",
+                       f"detection captured {latest - capture_stamp:.3f} s before the filter's time (more than "
+                       f"latency_horizon {self.config.latency_horizon:g} s): applied without latency compensation "
+                       f"({self.uncompensated_detections} so far)")
+            return rotation
+        self.compensated_detections += 1
+        self.last_latency = max(self.attitudes.latest_stamp - capture_stamp, 0.0)
+        return rotation @ delta
 
     def lost_time(self, stamp: float) -> float:
         """[s] since the last accepted detection at ``stamp`` (inf if none was ever accepted)."""

@@ -43,7 +43,8 @@ _PARAMETERS = {
                     choices=("ekf", "mekf")),
     "estimate_gyro_bias": (True, "mekf only: estimate a gyro bias"),
     "position_random_walk": (0.05, "[m/sqrt(s)] process noise of p_p_i (Q)"),
-    "attitude_random_walk": (0.03, "[rad/sqrt(s)] process noise of the relative attitude (Q)"),
+    "attitude_random_walk": (0.1, "[rad/sqrt(s)] process noise of the relative attitude (Q): gyro noise and the "
+                                  "platform's own rotation, which the model (4.10) leaves out"),
     "gyro_bias_random_walk": (0.002, "[rad/s/sqrt(s)] mekf bias process noise"),
     "initial_gyro_bias_sigma": (0.02, "[rad/s] mekf initial bias uncertainty"),
     "measurement_position_sigma": (0.02, "[m] detection position noise per axis (R)"),
@@ -61,6 +62,10 @@ _PARAMETERS = {
     "max_prediction_step": (0.1, "[s] IMU gaps longer than this are not integrated (reported)"),
     "imu_gap_reset": (0.5, "[s] an IMU gap this long resets an initialised filter: it re-initialises from K "
                       "consistent detections (a restarted bridge or PX4); 0: never"),
+    "latency_compensation": (True, "carry each detection from its capture stamp (header) to the filter's time by the "
+                                   "UAV's rotation in between (IMU attitudes); false: applied at arrival (thesis)"),
+    "latency_horizon": (0.5, "[s] IMU attitudes kept for the latency compensation; an older detection is applied "
+                             "uncompensated (warned)"),
     # Input guards (issue 12): refused inputs never reach the filter.
     "max_body_rate": (35.0, "[rad/s] IMU samples with a larger |rate| are refused (PX4 gyro range, 2000 deg/s)"),
     "max_specific_force": (16.0 * STANDARD_GRAVITY,
@@ -126,7 +131,9 @@ class PoseEstimatorNode(Node):
                                 float(p["reinit_min_lost_time"])),
             stale_timeout=float(p["stale_timeout"]),
             max_prediction_step=float(p["max_prediction_step"]),
-            imu_gap_reset=float(p["imu_gap_reset"]))
+            imu_gap_reset=float(p["imu_gap_reset"]),
+            latency_compensation=bool(p["latency_compensation"]),
+            latency_horizon=float(p["latency_horizon"]))
         self.core = PoseEstimatorCore(config, calibration)
         self._frame_id = str(p["frame_id"]) or f"uav{config.uav_id}/platform"
         self._tf_parent = str(p["body_frame_id"]) or f"uav{config.uav_id}/base_link"
@@ -282,7 +289,11 @@ class PoseEstimatorNode(Node):
             level, message = OK, "tracking the marker"
         self._resets_reported = core.resets
         values = {"accepted detections": core.accepted_detections, "rejected detections": core.rejected_detections,
-                  "initialisations": core.initialisations, "refused inputs": sum(core.refused.values())}
+                  "initialisations": core.initialisations, "refused inputs": sum(core.refused.values()),
+                  "latency-compensated detections": core.compensated_detections,
+                  "uncompensated detections (too old)": core.uncompensated_detections}
+        if math.isfinite(core.last_latency):
+            values["detection latency [s]"] = core.last_latency
         if state is not None:
             values |= {"detection age [s]": float(state.detection_age),
                        "leg angle [deg]": math.degrees(state.leg_angle)}
