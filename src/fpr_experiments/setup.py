@@ -36,6 +36,7 @@ setup(
             'node_group = fpr_experiments.node_group:main',
             'pilot = fpr_experiments.pilot_node:main',
             'info_link = fpr_experiments.info_link_node:main',
+            'detection_fallback = fpr_experiments.detection_fallback_node:main',
             'calibrate = fpr_experiments.calibration:main',
             'spread = fpr_experiments.spread:main',
             'faults = fpr_experiments.faults:main',

@@ -27,6 +27,7 @@ Keys (all optional but ``id``, ``title``, ``scenario``, ``script``, ``duration``
     parameters: {controller: {state_source: ground_truth}}   # per executable (fpr_experiments.graph)
     uav_parameters: [{executable: controller, uav_id: 2, parameters: {...}}]
     link_outage: [10.0, 13.0]         # [s] every zeta dropped in between (info_link node)
+    detection_fallback: true          # the thesis's MOCAP supervision of lost / false detections (§4.4.2)
     realism: ideal                    # fpr_sim realism profile: ideal | hardware (default DEFAULT_REALISM)
     window: [11.0, 71.0]              # [s] metrics only inside (and inside the tracking window)
     variants:
@@ -144,6 +145,8 @@ class Experiment:
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
     uav_parameters: list[UavParameters] = field(default_factory=list)
     link_outage: list[float] = field(default_factory=list)
+    #: the thesis's motion-capture supervision of the detections (§4.4.2; fpr_experiments.detection_fallback)
+    detection_fallback: bool = False
     realism: str = DEFAULT_REALISM  #: fpr_sim realism profile of the simulator and the inter-UAV link
     #: [s] simulated: the metrics' window is the tracking window inside [start, end] ([] = the whole flight)
     window: list[float] = field(default_factory=list)

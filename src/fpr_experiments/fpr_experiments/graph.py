@@ -45,6 +45,7 @@ EXECUTABLES: dict[str, tuple[str, str | None]] = {
     "joystick": ("fpr_control", None),
     "pilot": ("fpr_experiments", None),
     "info_link": ("fpr_experiments", None),
+    "detection_fallback": ("fpr_experiments", None),
 }
 #: executables that run once per UAV, in the namespace /fpr/uav<i>
 PER_UAV = ("px4_bridge", "aruco_detector", "pose_estimator", "controller")
@@ -133,6 +134,9 @@ class GraphOptions:
     #: route /fpr/info through an info_link node (a scheduled outage); sim only. The node is also there whenever
     #: the realism profile enables the Wi-Fi link model (scenario.link)
     info_link: bool = False
+    #: sim: the thesis's motion-capture supervision of the detections (§4.4.2, a ``detection_fallback`` node between
+    #: each UAV's camera pipeline and its pose estimator, which then reads :data:`CHECKED_MARKER_TOPIC`)
+    detection_fallback: bool = False
     #: MAVLink 2 signing key file for every px4_bridge and (sim) every emulated PX4; "": unsigned
     signing_key_file: str = ""
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -154,6 +158,9 @@ class GraphOptions:
             raise ValueError("cameras 'emulated' needs the simulator (backend sim); the robot uses images")
         if self.backend == "real" and (self.realism or self.info_link):
             raise ValueError("realism and info_link need the simulator (backend sim): the robot has its own")
+        if self.backend == "real" and self.detection_fallback:
+            raise ValueError("detection_fallback is an experiment set-up on the simulator's motion capture (backend "
+                             "sim); on the robot run the detection_fallback node by hand beside a MOCAP bridge")
         if self.realism:
             from fpr_sim.scenario import realism_profiles
 
@@ -183,6 +190,8 @@ def _spec(options: GraphOptions, executable: str, namespace: str, group: str, in
 
 #: sim with an info_link node: UAV j's controller reads the peers' ζ here (the node's ``output_topic``)
 INFO_LINK_TOPIC = "/fpr/uav{uav}/info_link"
+#: with ``detection_fallback``: the supervised detections each pose estimator reads (relative to /fpr/uav<i>)
+CHECKED_MARKER_TOPIC = "marker_checked"
 
 
 def describe_graph(options: GraphOptions) -> list[NodeSpec]:
@@ -220,7 +229,8 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
         specs.append(_spec(options, "px4_bridge", ns, group, bridge, i))
         if options.cameras == "images":
             specs.append(_spec(options, "aruco_detector", ns, group, {}, i))
-        specs.append(_spec(options, "pose_estimator", ns, group, {"uav_id": i, "n": n}, i))
+        fallback_remap = [("marker", CHECKED_MARKER_TOPIC)] if options.detection_fallback else None
+        specs.append(_spec(options, "pose_estimator", ns, group, {"uav_id": i, "n": n}, i, fallback_remap))
         controller = {"uav_id": i, "n": n, "mode": options.mode}
         if info_link is not None:
             controller["info_input_topic"] = INFO_LINK_TOPIC.format(uav=i)
@@ -234,6 +244,9 @@ def describe_graph(options: GraphOptions) -> list[NodeSpec]:
         specs.append(_spec(options, "joystick", GROUND_NAMESPACE, "ground", {}))
     if info_link is not None:
         specs.append(_spec(options, "info_link", "/fpr", "link", info_link))
+    if options.detection_fallback:
+        specs.append(_spec(options, "detection_fallback", "/fpr", "ground", {
+            "n": n, "output_topic": CHECKED_MARKER_TOPIC, "seed": int(scenario.seed)}))
     return specs
 
 

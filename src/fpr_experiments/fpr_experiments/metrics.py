@@ -22,6 +22,8 @@ Definitions (the thesis's symbols, ASCII names):
 - per UAV i (``uav<i>.…``): ``aruco_<axis>`` / ``ekf_<axis>`` RMSE of the raw ArUco relative pose (4.2) and the
   EKF output against the true p T_bi (x, y, z [m]; roll, pitch, yaw [deg] of p q_i, Table 4.6); and
   ``detection_rate_pct``: successful detections (error < 10 cm and < 10°, Table 4.8) per camera frame;
+  ``mocap_detection_pct``: with the thesis's motion-capture fallback, the share of the detections the estimator got
+  that were emulated from the motion capture (§4.4.2);
 - safety figures: ``max_abs_roll_deg`` / ``max_abs_pitch_deg`` (whole airborne flight), ``max_height_m``,
   ``max_excursion_m`` (horizontal, from the start), ``ground_contacts`` (UAVs touching the ground while the
   controllers fly, unless the operator just commanded a descent: that is landing), ``nonfinite_samples``.
@@ -98,6 +100,8 @@ for _kind in ("aruco", "ekf"):
             _unit, f"RMSE of the {'raw ArUco' if _kind == 'aruco' else 'EKF'} relative pose, {_axis}",
             3 if _unit == "m" else 2)
 METRIC_INFO["detection_rate_pct"] = MetricInfo("%", "successful detections (< 10 cm, < 10 deg) per frame", 1)
+METRIC_INFO["mocap_detection_pct"] = MetricInfo(
+    "%", "detections the estimator got from the motion-capture fallback (thesis §4.4.2), not the camera", 1)
 
 
 def metric_info(name: str) -> MetricInfo:
@@ -316,6 +320,13 @@ def compute_metrics(record: FlightRecord, window: np.ndarray | None = None) -> d
                     frames = metrics["tracking_time_s"] * record.camera_rate
                     metrics[f"{prefix}detection_rate_pct"] = 100.0 * min(1.0, ok.sum() / frames) if frames else \
                         math.nan
+
+    # ---- the thesis's motion-capture fallback (§4.4.2): the share of emulated detections the estimators got
+    for u in record.uavs:
+        if len(u.checked_t):
+            inside = _inside(u.checked_t, truth.t, mask)
+            if inside.any():
+                metrics[f"uav{u.uav_id}.mocap_detection_pct"] = 100.0 * float(u.checked_emulated[inside].mean())
 
     # ---- fallback and recovery
     periods = [len(u.fallback) for u in record.uavs]

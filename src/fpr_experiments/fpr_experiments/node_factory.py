@@ -24,6 +24,7 @@ NODE_CLASSES: dict[str, str] = {
     "joystick": "fpr_control.joystick_node:JoystickNode",
     "pilot": "fpr_experiments.pilot_node:PilotNode",
     "info_link": "fpr_experiments.info_link_node:InfoLinkNode",
+    "detection_fallback": "fpr_experiments.detection_fallback_node:DetectionFallbackNode",
 }
 
 

@@ -9,6 +9,7 @@ simulated second); the marker detections made from them are.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Iterable
@@ -26,6 +27,7 @@ from sensor_msgs.msg import BatteryState, Imu, Joy
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
+from fpr_experiments.graph import CHECKED_MARKER_TOPIC
 from fpr_experiments.mcap_log import RosMcapWriter, stamp_ns
 from fpr_experiments.records import (
     CommandSeries,
@@ -58,8 +60,10 @@ class Topic:
     latched: bool = False  #: transient local (/tf_static, /robot_description): the last message, whenever joined
 
 
-def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[Topic]:
-    """Every topic a run records (see the module doc)."""
+def recorded_topics(n: int, pilot: bool = False, target: bool = False,
+                    detection_fallback: bool = False) -> list[Topic]:
+    """Every topic a run records (see the module doc); ``detection_fallback``: also each UAV's supervised detections
+    (fpr_experiments.detection_fallback_node)."""
     topics = [Topic("/clock", Clock, False), Topic("/fpr/ground_truth", FprState, True),
               Topic("/fpr/motion_capture", FprState, True),
               Topic("/fpr/teleop", TeleopCommand, True), Topic("/fpr/info", InformationVector, False),
@@ -77,6 +81,8 @@ def recorded_topics(n: int, pilot: bool = False, target: bool = False) -> list[T
                    Topic(f"{ns}/wrench", WrenchEstimate, False), Topic(f"{ns}/marker", MarkerDetection, False),
                    Topic(f"{ns}/imu", Imu, False), Topic(f"{ns}/velocity_body", TwistStamped, False),
                    Topic(f"{ns}/battery", BatteryState, True)]
+        if detection_fallback:
+            topics.append(Topic(f"{ns}/{CHECKED_MARKER_TOPIC}", MarkerDetection, False))
     return topics
 
 
@@ -356,6 +362,9 @@ def flight_record(recording: Recording, n: int, **run_info) -> FlightRecord:
             *_xyz(m.relative_pose.position), *_wxyz(m.relative_pose.orientation), m.leg_angle, m.platform_roll,
             m.platform_pitch, m.valid])
         mt, mv = _series(recording.get(f"{ns}/marker"), 7, lambda m: _relative_from_marker(m, calibration))
+        # an emulated (motion-capture) detection has no image: NaN reprojection error (detection_fallback_node)
+        kt, kv = _series(recording.get(f"{ns}/{CHECKED_MARKER_TOPIC}"), 1,
+                         lambda m: [float(math.isnan(m.reprojection_error))])
         uavs.append(UavSeries(
             uav_id=i, status_t=st, bridge_state=sv[:, 0].astype(int), diagnostics_t=dt,
             active_mode=dv[:, 0].astype(int), fallback=dv[:, 1].astype(bool), desired_position=dv[:, 2:5],
@@ -364,7 +373,7 @@ def flight_record(recording: Recording, n: int, **run_info) -> FlightRecord:
             wrench_moment=wv[:, 3:6], wrench_contact=wv[:, 6], wrench_legs=wv[:, 7:], local_t=lt,
             local_position=lv[:, 0:3], local_quat=lv[:, 3:7], local_leg_angle=lv[:, 7], local_roll=lv[:, 8],
             local_pitch=lv[:, 9], local_valid=lv[:, 10].astype(bool), marker_t=mt, marker_position=mv[:, 0:3],
-            marker_quat=mv[:, 3:7]))
+            marker_quat=mv[:, 3:7], checked_t=kt, checked_emulated=kv[:, 0].astype(bool)))
     events = []
     if PILOT_EVENTS in recording.messages:
         import json

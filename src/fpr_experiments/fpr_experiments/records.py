@@ -81,6 +81,8 @@ class UavSeries:
     marker_t: np.ndarray = field(default_factory=_empty)
     marker_position: np.ndarray = field(default_factory=lambda: _empty(3))  #: ArUco p p_i via (4.2) [m]
     marker_quat: np.ndarray = field(default_factory=lambda: _empty(4))
+    checked_t: np.ndarray = field(default_factory=_empty)  #: detections the pose estimator got (detection_fallback)
+    checked_emulated: np.ndarray = field(default_factory=_empty)  #: bool: emulated from the motion capture
 
 
 @dataclass

@@ -126,6 +126,7 @@ def graph_options(experiment: Experiment, variant: Variant, scenario_file: str, 
     return GraphOptions(n=n, mode=resolved["mode"], cameras=cameras, backend="sim", scenario=scenario_file,
                         operator=experiment.operator, script=resolved["script"],
                         realism=realism or experiment.realism, info_link=bool(experiment.link_outage),
+                        detection_fallback=experiment.detection_fallback,
                         parameters=parameters,
                         uav_parameters=resolved["uav_parameters"])
 
@@ -199,7 +200,8 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     options = graph_options(experiment, variant, scenario_file, cameras, n, realism=realism)
     specs = describe_graph(options)
     write_graph_file(specs, os.path.join(output_dir, "graph.json"))
-    topics = recorded_topics(n, pilot=experiment.operator == "pilot", target=scenario_has_target(scenario))
+    topics = recorded_topics(n, pilot=experiment.operator == "pilot", target=scenario_has_target(scenario),
+                             detection_fallback=experiment.detection_fallback)
     label = f"{experiment.id}/{variant.id}"
     if log:
         _say(f"[{label}] scenario {os.path.basename(resolved['scenario'])}, script {resolved['script']}, "

@@ -57,6 +57,7 @@ __all__ = [
     "CameraModel",
     "EulerZxzPose",
     "VisionCalibration",
+    "camera_T_marker_of",
     "compose_transforms",
     "invert_transform",
     "load_vision_calibration",
@@ -96,6 +97,12 @@ def compose_transforms(*transforms) -> np.ndarray:
     for index, T in enumerate(transforms):
         out = out @ as_array(f"transforms[{index}]", T, (4, 4))
     return out
+
+
+def camera_T_marker_of(platform_T_body, body_T_camera, platform_T_marker) -> np.ndarray:
+    """``C_T_M = (b_T_C)⁻¹ (p_T_b)⁻¹ p_T_M``: the marker pose a camera mounted at ``b_T_C`` on a UAV at ``p_T_b``
+    sees; the inverse of (4.2) (the estimator's ``p_T_b = p_T_M · M_T_C · C_T_b``). 4×4, m."""
+    return invert_transform(body_T_camera) @ invert_transform(platform_T_body) @ platform_T_marker
 
 
 def transform_points(T, points) -> np.ndarray:

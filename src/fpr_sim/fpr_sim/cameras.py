@@ -19,7 +19,14 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
-from fpr_model.calibration import CameraModel, EulerZxzPose, VisionCalibration, invert_transform, make_transform
+from fpr_model.calibration import (
+    CameraModel,
+    EulerZxzPose,
+    VisionCalibration,
+    camera_T_marker_of,
+    invert_transform,
+    make_transform,
+)
 from fpr_model.rotations import quat_from_rotvec, quat_to_rotmat
 
 from fpr_sim.camera_renderer import FrameEffects, MarkerRenderer, RenderResult, emulate_relative_pose
@@ -121,14 +128,13 @@ class CameraRig:
 
     def camera_T_marker(self, platform_T_body: np.ndarray) -> np.ndarray:
         """``C_T_M = (b_T_C)⁻¹ (p_T_b)⁻¹ p_T_M`` (4.2) with the nominal b_T_C."""
-        return invert_transform(self.body_T_camera) @ invert_transform(platform_T_body) @ self.platform_T_marker
+        return camera_T_marker_of(platform_T_body, self.body_T_camera, self.platform_T_marker)
 
     def true_camera_T_marker(self, i: int, platform_T_body: np.ndarray) -> np.ndarray:
         """(4.2) with UAV i's TRUE b_T_C (the nominal one without calibration error: the same arithmetic)."""
         if not self.calibration_error:
             return self.camera_T_marker(platform_T_body)
-        body_T_camera = self.true_cameras[i].body_T_camera
-        return invert_transform(body_T_camera) @ invert_transform(platform_T_body) @ self.platform_T_marker
+        return camera_T_marker_of(platform_T_body, self.true_cameras[i].body_T_camera, self.platform_T_marker)
 
     # ---- rendered frames ------------------------------------------------------------------------------
     def render(self, truth: GroundTruth) -> list[RenderResult]:
