@@ -39,7 +39,10 @@ Tasks run one after the other inside [start, end]; each ends with a ``task_end``
   point; law (4.39) or the centralized reference aligns it), then climb along a height reference rising at
   ``approach_speed`` (never above ``target``'s height) until the platform is seen touching the board (true
   contact force above ``contact_threshold``), then press the force trigger to ``force`` over ``ramp`` s and hold
-  it ``duration`` s with the vertical stick centred, then release it (success = contact was made).
+  it ``duration`` s with the vertical stick centred, then release it (success = contact was made). A contact seen
+  lost for ``contact_loss_time`` while pressing (the platform slid off the board) releases the trigger and starts
+  the approach again from the board's height (event ``contact_lost``); the force is then held ``duration`` s from
+  the new contact.
 - ``hold``: keep P at ``target`` for ``duration`` s (success = inside ``success_radius`` at the end).
 
 After the last task and until ``end`` the pilot holds the last target. Everything is seeded.
@@ -133,6 +136,9 @@ class Task:
     contact_threshold: float = 0.3  #: [N] push: the operator sees the contact
     align_radius: float = math.inf  #: [m] push: climb only while P is this close (horizontally) to ``target``
     duration: float = 10.0         #: [s] push (holding the force), hold
+    #: [s] push: contact seen lost this long while pressing -> the operator releases the trigger and approaches
+    #: again (else a decentralized impedance pressing on nothing climbs at force / damping, 0.5 m/s at 5 N)
+    contact_loss_time: float = 0.5
     label: str = ""
 
     def __post_init__(self) -> None:
@@ -143,6 +149,8 @@ class Task:
             raise ValueError(f"task axes {unknown}: valid are {', '.join(_CHANNELS)}")
         if len(self.target) != 3 or not all(math.isfinite(v) for v in self.target):
             raise ValueError(f"task target must be 3 finite numbers, got {self.target}")
+        if not (math.isfinite(self.contact_loss_time) and self.contact_loss_time > 0.0):
+            raise ValueError(f"task contact_loss_time must be positive, got {self.contact_loss_time}")
 
 
 @dataclass
@@ -197,6 +205,7 @@ class Pilot:
         self._window_open: float | None = None
         self._inside_since: float | None = None
         self._contact_at: float | None = None
+        self._contact_lost_since: float | None = None
         self._next_decision = -math.inf
         self._sticks: dict[int, float] = {}
         self._events: list[dict] = []
@@ -231,7 +240,7 @@ class Pilot:
     # ---- task logic ---------------------------------------------------------------------------------
     def _start_task(self, t: float, index: int) -> None:
         self._index, self._task_start = index, t
-        self._window_open = self._inside_since = self._contact_at = None
+        self._window_open = self._inside_since = self._contact_at = self._contact_lost_since = None
         self._z_reference = None
         if index < len(self.plan.tasks):
             task = self.plan.tasks[index]
@@ -274,8 +283,17 @@ class Pilot:
                     self._event(t, "contact", force=round(seen.contact_force, 3))
                 elif elapsed > task.timeout:
                     self._end_task(t, False, "no contact")
+            elif seen.contact_force <= task.contact_threshold:
+                self._contact_lost_since = self._contact_lost_since if self._contact_lost_since is not None else t
+                if t - self._contact_lost_since >= task.contact_loss_time:
+                    self._event(t, "contact_lost", pressed=round(t - self._contact_at, 3))
+                    self._contact_at = self._contact_lost_since = None
+                    # back down to the board's height (the platform rose off it) and approach again
+                    self._z_reference = min(float(seen.position[2]), float(task.target[2]))
             elif t - self._contact_at > task.ramp + task.duration:
                 self._end_task(t, True, "force held")
+            else:
+                self._contact_lost_since = None
         elif task.kind == "hold" and elapsed > task.duration:
             target = np.asarray(task.target)
             self._end_task(t, bool(np.linalg.norm(seen.position - target) < task.success_radius), "held")

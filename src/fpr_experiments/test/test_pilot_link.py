@@ -16,14 +16,16 @@ DEAD_ZONE = 0.08
 
 
 def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, contact_height: float = np.inf,
-         sag: float = 0.0):
+         sag: float = 0.0, board_gone: tuple[float, float] = (np.inf, np.inf)):
     """A platform whose velocity in F_Fp is what the sticks ask (the teleop's dead zone, no dynamics), less a
     steady sink rate ``sag`` [m/s] (a decentralized controller without position integral under a thrust deficit:
-    it tracks the asked climb speed short by the deficit over its damping gain)."""
+    it tracks the asked climb speed short by the deficit over its damping gain). In ``board_gone`` [s] the board is
+    not there (the platform slid off it): no contact, and the force trigger climbs at 0.1 m/s per N."""
     position, dt, events, samples = start.astype(float), 0.02, [], []
     for step in range(int(duration / dt)):
         t = step * dt
-        contact = 5.0 if position[2] >= contact_height else 0.0
+        gone = board_gone[0] <= t < board_gone[1]
+        contact = 5.0 if position[2] >= contact_height and not gone else 0.0
         pilot.observe(Observation(t, position.copy(), yaw, contact))
         axes = pilot.axes(t)
         stick = {name: axes.get(c.axis, c.center) for name, c in CHANNELS.items()}
@@ -35,8 +37,10 @@ def _fly(pilot: Pilot, start: np.ndarray, duration: float, yaw: float = 0.3, con
         flat = np.array([speed("velocity_x"), speed("velocity_y"), speed("velocity_z")])
         world = np.array([np.cos(yaw) * flat[0] - np.sin(yaw) * flat[1], np.sin(yaw) * flat[0] + np.cos(yaw) * flat[1],
                           flat[2]])
-        position = position + (world - [0.0, 0.0, sag]) * dt
-        if position[2] > contact_height:
+        pressed = -5.0 * (stick["contact_force"] - 1.0)  # the mapping: released +1 -> 0 N, -5 N per unit
+        climb = 0.1 * pressed if gone else 0.0  # force / damping on nothing (10 N s/m)
+        position = position + (world - [0.0, 0.0, sag - climb]) * dt
+        if position[2] > contact_height and not gone:
             position[2] = contact_height
         events += pilot.take_events()
         samples.append((t, stick["contact_force"]))
@@ -92,6 +96,28 @@ def test_push_aligns_climbs_to_contact_then_asks_for_the_force():
     assert kinds[:2] == ["task_start", "contact"] and kinds[2] == "task_end" and events[2]["success"]
     forces = [-5.0 * (s - 1.0) for _, s in samples]  # the mapping: released +1 -> 0 N, scale -5 N per unit
     assert max(forces) == pytest.approx(5.0, abs=0.05)  # the trigger reached 5 N
+
+
+def test_a_contact_lost_while_pressing_releases_the_force_and_approaches_again():
+    """The platform slides off the board at 8 s (pressing on nothing it would climb at 0.5 m/s for as long as the
+    trigger is held): the operator sees the contact gone, releases the trigger after contact_loss_time (plus the
+    reaction delay), comes back down to the board's height and presses again when the board is back."""
+    plan = TaskPlan(0.0, 60.0, [Task("push", target=[0.0, 0.0, 2.2], approach_speed=0.1, force=5.0, ramp=1.0,
+                                     duration=6.0, contact_loss_time=0.5, axes=["z", "force"])])
+    config = PilotConfig(seed=3, stick_noise=0.0)
+    pilot = Pilot(config, plan, CHANNELS)
+    final, events, samples = _fly(pilot, np.array([0.0, 0.0, 2.0]), 30.0, contact_height=2.1, board_gone=(8.0, 12.0))
+    kinds = [e["event"] for e in events]
+    assert kinds[:3] == ["task_start", "contact", "contact_lost"] and "contact" in kinds[3:]
+    lost = next(e for e in events if e["event"] == "contact_lost")
+    assert 8.5 <= lost["t"] <= 8.5 + config.reaction_delay + 2 * config.update_period + 1e-9
+    released = next(t for t, s in samples if t > 8.0 and -5.0 * (s - 1.0) < 0.05)
+    assert released <= lost["t"] + config.update_period + 1e-9
+    assert final[2] == pytest.approx(2.1, abs=1e-9)  # back on the board, not flown away
+    end = next(e for e in events if e["event"] == "task_end")
+    assert end["success"] and end["t"] > 12.0 + 1.0 + 6.0  # the force held 6 s from the new contact
+    with pytest.raises(ValueError, match="contact_loss_time"):
+        Task("push", contact_loss_time=0.0)
 
 
 def test_the_operator_does_not_climb_before_alignment():
