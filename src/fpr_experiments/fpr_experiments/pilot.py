@@ -40,9 +40,10 @@ Tasks run one after the other inside [start, end]; each ends with a ``task_end``
   ``approach_speed`` (never above ``target``'s height) until the platform is seen touching the board (true
   contact force above ``contact_threshold``), then press the force trigger to ``force`` over ``ramp`` s and hold
   it ``duration`` s with the vertical stick centred, then release it (success = contact was made). A contact seen
-  lost for ``contact_loss_time`` while pressing (the platform slid off the board) releases the trigger and starts
-  the approach again from the board's height (event ``contact_lost``); the force is then held ``duration`` s from
-  the new contact.
+  lost while pressing — no contact force and the platform ``contact_loss_distance`` from where it touched (it slid
+  off the board), or no contact force for ``contact_loss_time`` — releases the trigger and starts the approach
+  again from the board's height (event ``contact_lost``); the force is then held ``duration`` s from the new
+  contact.
 - ``hold``: keep P at ``target`` for ``duration`` s (success = inside ``success_radius`` at the end).
 
 After the last task and until ``end`` the pilot holds the last target. Everything is seeded.
@@ -136,9 +137,12 @@ class Task:
     contact_threshold: float = 0.3  #: [N] push: the operator sees the contact
     align_radius: float = math.inf  #: [m] push: climb only while P is this close (horizontally) to ``target``
     duration: float = 10.0         #: [s] push (holding the force), hold
-    #: [s] push: contact seen lost this long while pressing -> the operator releases the trigger and approaches
-    #: again (else a decentralized impedance pressing on nothing climbs at force / damping, 0.5 m/s at 5 N)
-    contact_loss_time: float = 0.5
+    #: push: while pressing, the contact is seen lost when the platform is ``contact_loss_distance`` [m] from where
+    #: it touched without a contact force (it slid off the board), or after ``contact_loss_time`` [s] without one;
+    #: the operator then releases the trigger and approaches again (a decentralized impedance pressing on nothing
+    #: climbs at force / damping, 0.5 m/s at 5 N). A bounce on the board is neither.
+    contact_loss_distance: float = 0.10
+    contact_loss_time: float = 1.5
     label: str = ""
 
     def __post_init__(self) -> None:
@@ -149,8 +153,10 @@ class Task:
             raise ValueError(f"task axes {unknown}: valid are {', '.join(_CHANNELS)}")
         if len(self.target) != 3 or not all(math.isfinite(v) for v in self.target):
             raise ValueError(f"task target must be 3 finite numbers, got {self.target}")
-        if not (math.isfinite(self.contact_loss_time) and self.contact_loss_time > 0.0):
-            raise ValueError(f"task contact_loss_time must be positive, got {self.contact_loss_time}")
+        for name in ("contact_loss_time", "contact_loss_distance"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"task {name} must be positive, got {value}")
 
 
 @dataclass
@@ -206,6 +212,7 @@ class Pilot:
         self._inside_since: float | None = None
         self._contact_at: float | None = None
         self._contact_lost_since: float | None = None
+        self._contact_point: np.ndarray | None = None
         self._next_decision = -math.inf
         self._sticks: dict[int, float] = {}
         self._events: list[dict] = []
@@ -280,13 +287,15 @@ class Pilot:
             if self._contact_at is None:
                 if seen.contact_force > task.contact_threshold:
                     self._contact_at = t
+                    self._contact_point = np.array(seen.position, dtype=float)
                     self._event(t, "contact", force=round(seen.contact_force, 3))
                 elif elapsed > task.timeout:
                     self._end_task(t, False, "no contact")
             elif seen.contact_force <= task.contact_threshold:
                 self._contact_lost_since = self._contact_lost_since if self._contact_lost_since is not None else t
-                if t - self._contact_lost_since >= task.contact_loss_time:
-                    self._event(t, "contact_lost", pressed=round(t - self._contact_at, 3))
+                moved = float(np.linalg.norm(seen.position - self._contact_point))
+                if moved >= task.contact_loss_distance or t - self._contact_lost_since >= task.contact_loss_time:
+                    self._event(t, "contact_lost", pressed=round(t - self._contact_at, 3), moved=round(moved, 3))
                     self._contact_at = self._contact_lost_since = None
                     # back down to the board's height (the platform rose off it) and approach again
                     self._z_reference = min(float(seen.position[2]), float(task.target[2]))

@@ -99,18 +99,19 @@ def test_push_aligns_climbs_to_contact_then_asks_for_the_force():
 
 
 def test_a_contact_lost_while_pressing_releases_the_force_and_approaches_again():
-    """The platform slides off the board at 8 s (pressing on nothing it would climb at 0.5 m/s for as long as the
-    trigger is held): the operator sees the contact gone, releases the trigger after contact_loss_time (plus the
-    reaction delay), comes back down to the board's height and presses again when the board is back."""
+    """The platform slides off the board at 8 s (pressing on nothing it climbs at 0.5 m/s for as long as the
+    trigger is held): the operator sees it 10 cm away from where it touched (0.2 s, plus the reaction delay),
+    releases the trigger, comes back down to the board's height and presses again when the board is back."""
     plan = TaskPlan(0.0, 60.0, [Task("push", target=[0.0, 0.0, 2.2], approach_speed=0.1, force=5.0, ramp=1.0,
-                                     duration=6.0, contact_loss_time=0.5, axes=["z", "force"])])
+                                     duration=6.0, contact_loss_distance=0.1, axes=["z", "force"])])
     config = PilotConfig(seed=3, stick_noise=0.0)
     pilot = Pilot(config, plan, CHANNELS)
     final, events, samples = _fly(pilot, np.array([0.0, 0.0, 2.0]), 30.0, contact_height=2.1, board_gone=(8.0, 12.0))
     kinds = [e["event"] for e in events]
     assert kinds[:3] == ["task_start", "contact", "contact_lost"] and "contact" in kinds[3:]
     lost = next(e for e in events if e["event"] == "contact_lost")
-    assert 8.5 <= lost["t"] <= 8.5 + config.reaction_delay + 2 * config.update_period + 1e-9
+    assert 8.2 <= lost["t"] <= 8.2 + config.reaction_delay + 2 * config.update_period + 1e-9
+    assert lost["moved"] >= 0.1
     released = next(t for t, s in samples if t > 8.0 and -5.0 * (s - 1.0) < 0.05)
     assert released <= lost["t"] + config.update_period + 1e-9
     assert final[2] == pytest.approx(2.1, abs=1e-9)  # back on the board, not flown away
@@ -118,6 +119,28 @@ def test_a_contact_lost_while_pressing_releases_the_force_and_approaches_again()
     assert end["success"] and end["t"] > 12.0 + 1.0 + 6.0  # the force held 6 s from the new contact
     with pytest.raises(ValueError, match="contact_loss_time"):
         Task("push", contact_loss_time=0.0)
+    with pytest.raises(ValueError, match="contact_loss_distance"):
+        Task("push", contact_loss_distance=float("nan"))
+
+
+def test_a_bounce_on_the_board_does_not_release_the_force():
+    """Contact flickers (0.4 s off every 1 s) while the platform stays on the board: pressed throughout."""
+    plan = TaskPlan(0.0, 60.0, [Task("push", target=[0.0, 0.0, 2.2], approach_speed=0.1, force=5.0, ramp=1.0,
+                                     duration=6.0, axes=["z", "force"])])
+    pilot = Pilot(PilotConfig(seed=3, stick_noise=0.0), plan, CHANNELS)
+    position, events = np.array([0.0, 0.0, 2.0]), []
+    for step in range(int(20.0 / 0.02)):
+        t = step * 0.02
+        touching = position[2] >= 2.1 and (t % 1.0) < 0.6
+        pilot.observe(Observation(t, position.copy(), 0.3, 5.0 if touching else 0.0))
+        axes = pilot.axes(t)
+        climb = axes.get(CHANNELS["velocity_z"].axis, CHANNELS["velocity_z"].center) - CHANNELS["velocity_z"].center
+        position[2] = min(2.1, position[2] + (climb * CHANNELS["velocity_z"].scale if abs(climb) >= DEAD_ZONE
+                                              else 0.0) * 0.02)
+        events += pilot.take_events()
+    kinds = [e["event"] for e in events]
+    assert "contact" in kinds and "contact_lost" not in kinds
+    assert next(e for e in events if e["event"] == "task_end")["success"]
 
 
 def test_the_operator_does_not_climb_before_alignment():
