@@ -187,7 +187,7 @@ class PoseEstimatorCore:
         self.last_gate: GateDecision | None = None
         self.attitudes = AttitudeHistory(c.latency_horizon)  #: the UAV's attitudes, for the latency compensation
         self.compensated_detections = 0  #: carried from their capture stamp to the filter's time
-        self.uncompensated_detections = 0  #: older than latency_horizon (or before any IMU sample)
+        self.uncompensated_detections = 0  #: older than latency_horizon (applied as captured, said)
         self.last_latency = _NAN  #: [s] filter time − capture stamp of the last compensated detection
         self._refusing = {"imu": 0, "velocity": 0, "detection": 0}  # refused in a row, per input
         self._events: deque[GuardEvent] = deque(maxlen=64)
@@ -377,7 +377,7 @@ class PoseEstimatorCore:
                        f"({self.uncompensated_detections} so far)")
             return rotation
         self.compensated_detections += 1
-        self.last_latency = max(self.attitudes.latest_stamp - capture_stamp, 0.0)
+        self.last_latency = max(latest - capture_stamp, 0.0)
         return rotation @ delta
 
     def lost_time(self, stamp: float) -> float:

@@ -95,21 +95,25 @@ class DetectionFallback:
         self.emulated = [0] * self.n  #: emulated detections given (false ones replaced + while lost)
 
     # -- motion capture ---------------------------------------------------------------------------------------
-    def on_mocap(self, stamp: float, platform_position, platform_quat, uav_positions, uav_quats) -> None:
-        """One motion-capture sample at ``stamp`` [s]: poses in F0 (positions [m], quaternions [w, x, y, z])."""
+    def on_mocap(self, stamp: float, platform_position, platform_quat, uav_positions, uav_quats) -> str | None:
+        """One motion-capture sample at ``stamp`` [s]: poses in F0 (positions [m], unit quaternions [w, x, y, z]).
+        Returns None, or why the sample was refused (the previous samples stand)."""
         stamp = float(stamp)
         if len(uav_positions) != self.n or len(uav_quats) != self.n:
-            raise ValueError(f"motion capture with {len(uav_positions)} UAV poses, expected {self.n}")
+            return f"motion capture with {len(uav_positions)} UAV poses, {len(uav_quats)} attitudes, expected {self.n}"
         values = [platform_position, platform_quat, *uav_positions, *uav_quats]
-        if not all(np.isfinite(np.asarray(v, dtype=float)).all() for v in values):
-            return  # a dropped / corrupt frame: the previous samples stand
+        if not all(np.isfinite(np.asarray(v, dtype=float)).all() for v in values) or not np.isfinite(stamp):
+            return "motion capture with NaN/inf"
+        if not all(abs(float(np.linalg.norm(q)) - 1.0) <= 0.01 for q in (platform_quat, *uav_quats)):
+            return "motion capture with a non-unit quaternion"
         if self._mocap and stamp <= self._mocap[-1][0]:
-            return
+            return None  # not newer than the last sample: nothing to add
         world_T_platform_inv = invert_transform(_pose(platform_position, platform_quat))
         relative = [world_T_platform_inv @ _pose(p, q) for p, q in zip(uav_positions, uav_quats, strict=True)]
         self._mocap.append((stamp, relative))
         while len(self._mocap) > 1 and self._mocap[0][0] < stamp - self.config.history:
             self._mocap.popleft()
+        return None
 
     def mocap_relative_pose(self, uav: int, stamp: float) -> tuple[float, np.ndarray] | None:
         """(sample stamp, ``p_T_bi``) of the motion-capture sample nearest ``stamp`` for UAV ``uav`` (1-based)."""

@@ -17,7 +17,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from fpr_model.node_parameters import NodeParameters
+from fpr_control.node_utils import LOG_THROTTLE_S
+from fpr_model.node_parameters import NodeParameters, throttle
 from fpr_model.rotations import quat_to_rotmat, rotmat_to_quat
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -92,10 +93,10 @@ class DetectionFallbackNode(Node):
         def quat(p):
             return (p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z)
 
-        if len(msg.uav_poses) != self.core.n:
-            return
-        self.core.on_mocap(_seconds(msg.header.stamp), position(msg.platform_pose), quat(msg.platform_pose),
-                           [position(p) for p in msg.uav_poses], [quat(p) for p in msg.uav_poses])
+        reason = self.core.on_mocap(_seconds(msg.header.stamp), position(msg.platform_pose), quat(msg.platform_pose),
+                                    [position(p) for p in msg.uav_poses], [quat(p) for p in msg.uav_poses])
+        if reason is not None:
+            self.get_logger().warning(f"{reason}: sample refused", **throttle(self, LOG_THROTTLE_S))
 
     def _on_detection(self, uav: int, msg: MarkerDetection) -> None:
         self._frame_ids[uav] = msg.header.frame_id or self._frame_ids[uav]

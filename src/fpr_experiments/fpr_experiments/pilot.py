@@ -248,7 +248,7 @@ class Pilot:
     def _start_task(self, t: float, index: int) -> None:
         self._index, self._task_start = index, t
         self._window_open = self._inside_since = self._contact_at = self._contact_lost_since = None
-        self._z_reference = None
+        self._contact_point = self._z_reference = None
         if index < len(self.plan.tasks):
             task = self.plan.tasks[index]
             extra = {"target": list(task.target)} if task.kind in ("goto", "hold") else {}

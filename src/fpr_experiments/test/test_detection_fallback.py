@@ -109,10 +109,11 @@ def test_without_motion_capture_nothing_is_emulated_and_bad_inputs_are_refused()
     assert not core.on_detection(1, 0.1, _detection(1, offset=np.array([1.0, 0.0, 0.0]))).emulated
     assert core.due(2, 0.0) is None and core.due(2, 2.0) is None  # lost, but nothing to emulate from
     positions, quats = _world_poses()
-    core.on_mocap(0.0, PLATFORM[0], [np.nan, 0, 0, 0], positions, quats)  # a corrupt frame is skipped
+    assert "NaN" in core.on_mocap(0.0, PLATFORM[0], [np.nan, 0, 0, 0], positions, quats)  # refused, said
+    assert "non-unit" in core.on_mocap(0.0, PLATFORM[0], [0.0, 0, 0, 0], positions, quats)
+    assert "UAV poses" in core.on_mocap(0.0, *PLATFORM, positions[:2], quats[:2])
     assert core.mocap_relative_pose(1, 0.0) is None
-    with pytest.raises(ValueError, match="UAV poses"):
-        core.on_mocap(0.0, *PLATFORM, positions[:2], quats[:2])
+    assert core.on_mocap(0.0, *PLATFORM, positions, quats) is None and core.mocap_relative_pose(1, 0.0) is not None
     for bad in ({"lost_timeout": 0.0}, {"rate": math.inf}, {"position_noise": -0.1}, {"max_angle_error": math.nan}):
         with pytest.raises(ValueError):
             FallbackConfig(**bad)
