@@ -197,6 +197,10 @@ def _realism_text(realism: dict | None) -> str:
     if not realism:
         return ""
     plant = ", ".join(realism.get("plant_overrides") or []) or "none"
+    drawn = sorted((realism.get("plant_draws") or {}).get("mismatch") or {})
+    # the model mismatch's seeded draws (fpr_sim.plant_realism) differ from the controllers' Table B.1 model too
+    mismatch = (f"drawn off Table B.1 by the model mismatch ({len(drawn)} parameters, metrics.json "
+                f"realism.plant_draws), " if drawn else "")
     sensors, cameras = realism.get("sensors") or {}, realism.get("cameras") or {}
     enabled = [name for name, section in (realism.get("sections") or {}).items()
                if isinstance(section, dict) and section.get("enabled")]
@@ -205,8 +209,8 @@ def _realism_text(realism: dict | None) -> str:
             f"{sensors.get('accel_noise', realism.get('imu_accel_noise_m_s2'))} m/s²; emulated marker pose noise "
             f"{cameras.get('position_noise', realism.get('camera_position_noise_m'))} m / "
             f"{cameras.get('angle_noise', realism.get('camera_angle_noise_rad')) or 0.0:.3f} rad; image pixel noise "
-            f"{cameras.get('pixel_noise', realism.get('camera_pixel_noise'))}; plant parameters differing from the "
-            f"model: {plant}.")
+            f"{cameras.get('pixel_noise', realism.get('camera_pixel_noise'))}; plant parameters: "
+            f"{mismatch}set by the scenario: {plant}.")
 
 
 def _fmt(value: float | None, digits: int) -> str:
