@@ -39,10 +39,16 @@ class FilterNoise:
     initial_gyro_bias_sigma: float = 0.02  #: [rad/s] (MEKF with bias estimation only)
     measurement_position_sigma: float = 0.02  #: [m] per axis
     measurement_angle_sigma: float = float(np.radians(2.0))  #: [rad] per axis
+    #: MEKF with the platform-rate state only: density of its Gauss-Markov process [rad/s/√s], its time constant
+    #: [s] and its initial 1-σ [rad/s] (steady-state 1-σ = density · √(τ/2))
+    platform_rate_random_walk: float = 1.0
+    platform_rate_time_constant: float = 1.0
+    initial_platform_rate_sigma: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("position_random_walk", "attitude_random_walk", "gyro_bias_random_walk",
-                     "initial_gyro_bias_sigma", "measurement_position_sigma", "measurement_angle_sigma"):
+                     "initial_gyro_bias_sigma", "measurement_position_sigma", "measurement_angle_sigma",
+                     "platform_rate_random_walk", "platform_rate_time_constant", "initial_platform_rate_sigma"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name}: must be positive and finite, got {value}")

@@ -42,6 +42,10 @@ _PARAMETERS = {
     "filter": Param("ekf", "ekf (thesis (4.9)-(4.16)) or mekf (multiplicative error-state EKF)",
                     choices=("ekf", "mekf")),
     "estimate_gyro_bias": (True, "mekf only: estimate a gyro bias"),
+    "platform_rate": (False, "mekf only: the platform's angular velocity as a state (a Gauss-Markov process), "
+                             "used by the prediction and the latency compensation (not in the thesis)"),
+    "platform_rate_random_walk": (1.0, "[rad/s/sqrt(s)] mekf platform_rate: density of the rate's process"),
+    "platform_rate_time_constant": (1.0, "[s] mekf platform_rate: the rate decays to 0 with it without detections"),
     "position_random_walk": (0.05, "[m/sqrt(s)] process noise of p_p_i (Q)"),
     "attitude_random_walk": (0.1, "[rad/sqrt(s)] process noise of the relative attitude (Q): gyro noise and the "
                                   "platform's own rotation, which the model (4.10) leaves out"),
@@ -116,9 +120,11 @@ class PoseEstimatorNode(Node):
         config = EstimatorConfig(
             uav_id=int(p["uav_id"]), n=int(p["n"]), platform_radius=float(p["platform_radius"]),
             filter=str(p["filter"]), estimate_gyro_bias=bool(p["estimate_gyro_bias"]),
+            platform_rate=bool(p["platform_rate"]),
             noise=FilterNoise(float(p["position_random_walk"]), float(p["attitude_random_walk"]),
                               float(p["gyro_bias_random_walk"]), float(p["initial_gyro_bias_sigma"]),
-                              float(p["measurement_position_sigma"]), float(p["measurement_angle_sigma"])),
+                              float(p["measurement_position_sigma"]), float(p["measurement_angle_sigma"]),
+                              float(p["platform_rate_random_walk"]), float(p["platform_rate_time_constant"])),
             gate=GateConfig(str(p["gate_mode"]), float(p["gate_max_position_error"]),
                             float(p["gate_max_angle_error"]), float(p["gate_mahalanobis_threshold"]),
                             float(p["gate_position_error_rate"]), float(p["gate_angle_error_rate"]),
