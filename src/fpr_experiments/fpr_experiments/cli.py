@@ -36,6 +36,12 @@ def _parser() -> argparse.ArgumentParser:
                         help="override one scenario value in every variant (repeatable; dotted key, YAML value), "
                              "laid over the realism profile, e.g. --set actuation.thrust_noise=0.02 (ablations: "
                              "the run's scenario.yaml keeps the merged values)")
+    parser.add_argument("--param", action="append", default=None, metavar="EXECUTABLE.NAME=VALUE",
+                        dest="parameters",
+                        help="override one node parameter of every node of an executable in every variant "
+                             "(repeatable; YAML value), laid over the experiment's, e.g. --param "
+                             "pose_estimator.filter=mekf (ablations of the onboard software; graph.json keeps what "
+                             "each node got; a name the node does not declare stops the run)")
     parser.add_argument("--processes", action="store_true",
                         help="one process per UAV / ground station / simulator, as on the robot (default: one)")
     parser.add_argument("--real-time-factor", type=float, default=0.5,
@@ -85,6 +91,8 @@ def _experiment_flags(args) -> list[str]:
         tokens += ["--realism", args.realism]
     for override in args.overrides or []:
         tokens += ["--set", override]
+    for parameter in args.parameters or []:
+        tokens += ["--param", parameter]
     if args.processes:
         tokens.append("--processes")
     return tokens
@@ -110,6 +118,31 @@ def scenario_overrides(settings: list[str] | None) -> dict | None:
         except yaml.YAMLError as error:
             raise ValueError(f"--set {setting!r}: the value is not YAML ({error})") from None
     return nested_overrides(assignment)
+
+
+def parameter_overrides(settings: list[str] | None) -> dict | None:
+    """``["pose_estimator.filter=mekf", ...]`` -> ``{"pose_estimator": {"filter": "mekf"}}`` (values parsed as YAML);
+    None without settings. A malformed setting or an executable the graph does not have is a ValueError naming it."""
+    import yaml
+
+    from fpr_experiments.graph import EXECUTABLES
+
+    if not settings:
+        return None
+    overrides: dict[str, dict] = {}
+    for setting in settings:
+        key, separator, text = setting.partition("=")
+        executable, dot, name = key.strip().partition(".")
+        if not separator or not dot or not executable or not name:
+            raise ValueError(f"--param {setting!r}: expected EXECUTABLE.NAME=VALUE, e.g. pose_estimator.filter=mekf")
+        if executable not in EXECUTABLES:
+            raise ValueError(f"--param {setting!r}: no executable '{executable}' in the graph; valid: "
+                             f"{', '.join(EXECUTABLES)}")
+        try:
+            overrides.setdefault(executable, {})[name] = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ValueError(f"--param {setting!r}: the value is not YAML ({error})") from None
+    return overrides
 
 
 def _write_results(names: list[str], output_root: str, path: str, command: str) -> str:
@@ -204,6 +237,7 @@ def run_main(argv: list[str] | None = None) -> int:
         if args.realism is not None:
             check_realism(args.realism, "--realism")
         overrides = scenario_overrides(args.overrides)
+        parameters = parameter_overrides(args.parameters)
         experiments = [load_experiment(name) for name in names]  # every name and file checked before anything flies
         start, status, failed = time.monotonic(), 0, []
         if args.live_view is not None and args.name == "all" and args.jobs > 1:
@@ -220,7 +254,7 @@ def run_main(argv: list[str] | None = None) -> int:
                                     processes=args.processes, variants=args.variant, output_root=output_root,
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
                                     realism=args.realism, live_view_port=args.live_view,
-                                    scenario_overrides=overrides)
+                                    scenario_overrides=overrides, parameter_overrides=parameters)
             if not result.passed:
                 status = 1
                 failed.append(name)

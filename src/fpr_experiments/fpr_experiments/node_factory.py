@@ -70,9 +70,17 @@ def build_node(spec: NodeSpec, context, lean: bool = False) -> Node:
     ~350 to ~70 entities for n = 3 (see docs/benchmarks.md)."""
     cls = node_class(spec.executable)
     if lean:
-        return lean_class(cls)(context=context, cli_args=spec.ros_args(), use_global_arguments=False,
+        node = lean_class(cls)(context=context, cli_args=spec.ros_args(), use_global_arguments=False,
                                start_parameter_services=False)
-    return cls(context=context, cli_args=spec.ros_args(), use_global_arguments=False)
+    else:
+        node = cls(context=context, cli_args=spec.ros_args(), use_global_arguments=False)
+    # rclpy ignores an override of a parameter the node does not declare: a misspelt one would fly unnoticed
+    unknown = sorted(name for name in spec.parameters if not node.has_parameter(name))
+    if unknown:
+        node.destroy_node()
+        raise ValueError(f"{spec.fully_qualified_name} ({spec.package} {spec.executable}): no parameter named "
+                         f"{', '.join(unknown)}")
+    return node
 
 
 def build_nodes(specs: Sequence[NodeSpec], context, lean: bool = False) -> list[Node]:

@@ -19,7 +19,7 @@ import os
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from fpr_experiments.catalog import Experiment, Variant, load_experiment
@@ -179,13 +179,17 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
                 quick: bool = False, cameras: str | None = None, processes: bool = False,
                 real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
                 scenario_overrides: Mapping[str, Any] | None = None,
-                live_view_port: int | None = None) -> VariantResult:
+                live_view_port: int | None = None,
+                parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> VariantResult:
     """Fly one variant and write its report folder (see the module doc); ``realism`` None: the experiment's
-    profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`)."""
+    profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`);
+    ``parameter_overrides`` ``{executable: {parameter: value}}`` laid over the experiment's and the variant's node
+    parameters (every node of that executable; graph.json keeps what each node got)."""
     from fpr_experiments import report
     from fpr_experiments.metrics import compute_metrics
     from fpr_experiments.recording import flight_record, recorded_topics, write_mcap
 
+    variant = with_parameter_overrides(variant, parameter_overrides)
     resolved = experiment.resolved(variant)
     duration = resolved["quick_duration"] if quick else resolved["duration"]
     cameras = cameras or experiment.cameras
@@ -206,7 +210,9 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     if log:
         _say(f"[{label}] scenario {os.path.basename(resolved['scenario'])}, script {resolved['script']}, "
              f"mode {resolved['mode']}, {cameras} cameras, realism {scenario.realism}"
-             f"{' + overrides' if scenario_overrides else ''}, seed {scenario.seed}, {duration:.0f} s simulated"
+             f"{' + overrides' if scenario_overrides else ''}"
+             f"{' + node parameters ' + _parameters_text(parameter_overrides) if parameter_overrides else ''}, "
+             f"seed {scenario.seed}, {duration:.0f} s simulated"
              f"{' (quick)' if quick else ''}, {'processes' if processes else 'one process'} -> {output_dir}")
     wall_start = time.monotonic()
     live_view = None
@@ -306,7 +312,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
                    processes: bool = False, variants: list[str] | None = None, output_root: str | None = None,
                    real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
                    scenario_overrides: Mapping[str, Any] | None = None,
-                   live_view_port: int | None = None) -> ExperimentResult:
+                   live_view_port: int | None = None,
+                   parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> ExperimentResult:
     """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``.
 
     ``realism``: a realism profile (fpr_sim.scenario.realism_profiles) instead of the experiment's (catalog key
@@ -314,7 +321,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
     deep-merged over every variant's scenario, e.g. ``{"actuation": {"thrust_noise": 0.02}}``; the merged
     scenario is each variant's ``scenario.yaml``, the file the simulator and the info link read. ``live_view_port``:
     serve each flight to the Foxglove app on ws://127.0.0.1:<port> while it runs (fpr_experiments.live_view; 0: an
-    ephemeral port, printed)."""
+    ephemeral port, printed). ``parameter_overrides``: node parameters of every variant, ``{executable: {name:
+    value}}`` (ablations of the onboard software; a name no node of the executable declares stops the run)."""
     from fpr_experiments import report
     from fpr_experiments.catalog import check_realism
 
@@ -329,13 +337,31 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
         results[variant.id] = run_variant(
             experiment, variant, os.path.join(root, variant.id), seed=seed, quick=quick, cameras=cameras,
             processes=processes, real_time_factor=real_time_factor, plots=plots, log=log, realism=realism,
-            scenario_overrides=scenario_overrides, live_view_port=live_view_port)
+            scenario_overrides=scenario_overrides, live_view_port=live_view_port,
+            parameter_overrides=parameter_overrides)
     result = ExperimentResult(experiment.id, results, root)
     result.summary = report.write_experiment_report(experiment, result, root, quick=quick, seed=seed,
                                                     processes=processes, plots=plots)
     if log:
         _say("\n" + report.format_experiment_table(experiment, result.summary))
     return result
+
+
+def with_parameter_overrides(variant: Variant, overrides: Mapping[str, Mapping[str, Any]] | None) -> Variant:
+    """``variant`` with ``overrides`` (``{executable: {name: value}}``) laid over its node parameters, which
+    :meth:`Experiment.resolved` lays over the experiment's: an override wins over both. None: ``variant`` itself."""
+    if not overrides:
+        return variant
+    merged = {executable: dict(values) for executable, values in variant.parameters.items()}
+    for executable, values in overrides.items():
+        merged.setdefault(executable, {}).update(values)
+    return replace(variant, parameters=merged)
+
+
+def _parameters_text(overrides: Mapping[str, Mapping[str, Any]]) -> str:
+    """``controller.observer=sowo, pose_estimator.filter=mekf`` (the run's log line)."""
+    return ", ".join(f"{executable}.{name}={value}" for executable, values in overrides.items()
+                     for name, value in values.items())
 
 
 def main_exit_code(result: ExperimentResult) -> int:

@@ -79,3 +79,32 @@ def test_bad_experiment_data_is_refused_with_the_valid_keys():
         experiment_from_dict({**BASE, "variants": [{"id": "a"}, {"id": "a"}]})
     with pytest.raises(ValueError, match="check 'roll_rmse_deg'"):
         experiment_from_dict({**BASE, "checks": {"roll_rmse_deg": {"below": 3}}})
+
+
+def test_every_variant_graph_builds_with_every_parameter_it_sets_declared(tmp_path):
+    """Every node of every variant's graph is built (not flown) with the catalog's parameters: a parameter no node
+    declares (a typo in an experiment's YAML) stops the build with its name (fpr_experiments.node_factory), where
+    rclpy alone would ignore it and the flight would run without it."""
+    import rclpy
+    from fpr_experiments.graph import describe_graph
+    from fpr_experiments.node_factory import build_nodes
+    from fpr_experiments.runner import effective_scenario, graph_options
+    from fpr_sim.scenario import load_scenario
+
+    built = 0
+    for experiment in load_all():
+        for variant in experiment.variants:
+            resolved = experiment.resolved(variant)
+            path = effective_scenario(resolved["scenario"], None, str(tmp_path / f"{experiment.id}_{variant.id}.yaml"),
+                                      experiment.realism, None)
+            specs = describe_graph(graph_options(experiment, variant, path, experiment.cameras,
+                                                 load_scenario(path).n, realism=experiment.realism))
+            context = rclpy.Context()
+            rclpy.init(context=context, args=[])
+            try:
+                for node in build_nodes(specs, context, lean=True):
+                    node.destroy_node()
+                    built += 1
+            finally:
+                context.try_shutdown()
+    assert built > 300  # 31 variants, 13-22 nodes each

@@ -152,3 +152,20 @@ def test_rcl_applies_files_overrides_and_only_the_matching_node_section(tmp_path
         context.try_shutdown()
     assert values == [("/fpr/uav1/controller", 0.2, 21.5, 1, True), ("/fpr/uav2/controller", 0.35, 21.5, 2, True),
                       ("/fpr/uav3/controller", 0.2, 21.5, 3, True)]
+
+
+def test_a_parameter_no_node_declares_stops_the_build_with_its_name():
+    """rclpy ignores an override of an undeclared parameter: a misspelt --param or YAML key would fly unnoticed."""
+    import rclpy
+    from fpr_experiments.node_factory import build_nodes
+
+    specs = [s for s in describe_graph(GraphOptions(parameters={"controller": {"max_thrst": 21.5}}))
+             if s.executable == "controller"]
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[])
+    try:
+        with pytest.raises(ValueError, match=r"/fpr/uav1/controller \(fpr_control controller\): no parameter named "
+                                             r"max_thrst"):
+            build_nodes(specs, context)
+    finally:
+        context.try_shutdown()

@@ -136,6 +136,34 @@ def test_set_overrides_parse_as_a_nested_yaml_overlay_and_pass_to_every_experime
     assert cli._command_line(args) == "ros2 run fpr_experiments run all --set 'link.latency=[0.01, 0.02]' --jobs 2"
 
 
+def test_param_overrides_parse_per_executable_and_pass_to_every_experiment_run():
+    """``--param EXECUTABLE.NAME=VALUE`` (ablations of the onboard software): values are YAML, the executable must
+    be one of the graph's, ``run all --jobs`` hands them on, and the run lays them over the variant's."""
+    import fpr_experiments.cli as cli
+    from fpr_experiments.catalog import load_experiment
+    from fpr_experiments.runner import with_parameter_overrides
+
+    assert cli.parameter_overrides(None) is None
+    assert cli.parameter_overrides(["pose_estimator.filter=mekf", "pose_estimator.platform_rate=true",
+                                    "controller.observer=sowo"]) == {
+        "pose_estimator": {"filter": "mekf", "platform_rate": True}, "controller": {"observer": "sowo"}}
+    for bad in ("pose_estimator.filter", "filter=mekf", ".filter=mekf", "pose_estimator.=1", "pose_estimator.a=[1,"):
+        with pytest.raises(ValueError, match="--param"):
+            cli.parameter_overrides([bad])
+    with pytest.raises(ValueError, match="no executable 'pose_estimatr'"):
+        cli.parameter_overrides(["pose_estimatr.filter=mekf"])
+    args = cli._parser().parse_args(["all", "--jobs", "2", "--param", "pose_estimator.filter=mekf"])
+    assert cli._experiment_flags(args) == ["--param", "pose_estimator.filter=mekf"]
+    # the variant's own parameters stay, the override wins where both set one (table_4_6 sets gate_mode off)
+    experiment = load_experiment("table_4_6")
+    variant = with_parameter_overrides(experiment.variants[0], {"pose_estimator": {"filter": "mekf"},
+                                                                "controller": {"observer": "sowo"}})
+    resolved = experiment.resolved(variant)["parameters"]
+    assert resolved["pose_estimator"] == {"gate_mode": "off", "filter": "mekf"}
+    assert resolved["controller"] == {"observer": "sowo"}  # the experiment's fowo, overridden
+    assert with_parameter_overrides(experiment.variants[0], None) is experiment.variants[0]
+
+
 def test_cli_set_with_an_unknown_scenario_key_is_one_line_before_anything_flies(tmp_path, capsys):
     assert run_main(["table_3_2", "--set", "actuation.thrust_nosie=0.1", "--output-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
