@@ -322,7 +322,7 @@ class PoseEstimatorCore:
         position = platform_T_body[:3, 3].copy()
         rotation = platform_T_body[:3, :3]
         if self.config.latency_compensation and capture_stamp is not None and _finite(capture_stamp):
-            position, rotation = self._compensate_latency(float(capture_stamp), position, rotation)
+            rotation = self._compensate_latency(float(capture_stamp), rotation)
         quaternion = rotmat_to_quat(rotation)
         if not self.filter.initialized:
             self.candidates.add(stamp, position, quaternion)
@@ -365,15 +365,14 @@ class PoseEstimatorCore:
                    f"{len(self.candidates)} now)")
         return decision
 
-    def _compensate_latency(self, capture_stamp: float, position: np.ndarray,
-                            rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _compensate_latency(self, capture_stamp: float, rotation: np.ndarray) -> np.ndarray:
         """``p_R_bi(t) = p_R_bi(t_c) · Δ`` with Δ the UAV's rotation from the capture ``t_c`` to the filter's time
         ``t`` (:meth:`.AttitudeHistory.rotation_since`); the position is kept (ṗ = 0, (4.10)). With the MEKF's
         platform-rate state, the platform's rotation over ``t − t_c`` at the estimated rate is carried too:
         ``p_R_bi(t) = Exp(−w (t − t_c)) p_R_bi(t_c) Δ`` (the position still kept: the leg turns with the platform)."""
         latest = self.attitudes.latest_stamp
         if latest is None:  # no IMU attitude yet: the filter has no time of its own to carry the detection to
-            return position, rotation
+            return rotation
         delta = self.attitudes.rotation_since(capture_stamp)
         if delta is None:
             self.uncompensated_detections += 1
@@ -381,14 +380,13 @@ class PoseEstimatorCore:
                        f"detection captured {latest - capture_stamp:.3f} s before the filter's time (more than "
                        f"latency_horizon {self.config.latency_horizon:g} s): applied without latency compensation "
                        f"({self.uncompensated_detections} so far)")
-            return position, rotation
+            return rotation
         self.compensated_detections += 1
         self.last_latency = max(latest - capture_stamp, 0.0)
-        platform_back = self.filter.platform_rotation(self.last_latency).T if self.filter.initialized and \
-            isinstance(self.filter, RelativePoseMEKF) else None
-        if platform_back is None:
-            return position, rotation @ delta
-        return position, platform_back @ rotation @ delta
+        rotation = rotation @ delta
+        if isinstance(self.filter, RelativePoseMEKF) and self.filter.estimate_platform_rate and self.filter.initialized:
+            rotation = self.filter.platform_rotation(self.last_latency).T @ rotation
+        return rotation
 
     def lost_time(self, stamp: float) -> float:
         """[s] since the last accepted detection at ``stamp`` (inf if none was ever accepted)."""

@@ -165,25 +165,30 @@ class RelativePoseMEKF:
         with ``δx = [δp, δθ, (δb), δw]`` (dim ≤ 12). Only with the platform-rate state."""
         if self._rate_index is None:
             raise ValueError("error_transition: the filter has no platform-rate state")
+        return self._transition(np.asarray(body_rate, dtype=float) - self.gyro_bias, quat_to_rotmat(self.q).T,
+                                float(np.exp(-dt / self.noise.platform_rate_time_constant)), dt)
+
+    def _transition(self, gyro: np.ndarray, body_R_platform: np.ndarray, decay: float, dt: float) -> np.ndarray:
+        """F from the bias-corrected gyro ``ω − b``, ``R(q)ᵀ`` and the rate's decay ``exp(−T_s / τ_w)``."""
         r = self._rate_index
-        gyro = np.asarray(body_rate, dtype=float) - self.gyro_bias
         F = np.eye(self.dim)
         F[3:6, 3:6] = quat_to_rotmat(quat_from_rotvec(gyro * dt)).T  # exp(−[(ω − b) T_s]×)
-        F[3:6, r:r + 3] = -quat_to_rotmat(self.q).T * dt  # ∂δθ̇/∂δw = −R(q)ᵀ
+        F[3:6, r:r + 3] = -body_R_platform * dt  # ∂δθ̇/∂δw = −R(q)ᵀ
         if self.estimate_gyro_bias:
             F[3:6, 6:9] = -np.eye(3) * dt
-        F[r:r + 3, r:r + 3] = np.eye(3) * np.exp(-dt / self.noise.platform_rate_time_constant)
+        F[r:r + 3, r:r + 3] = np.eye(3) * decay
         return F
 
     def _predict_with_platform_rate(self, body_rate: np.ndarray, dt: float) -> None:
         """The prediction with the platform-rate state (module doc): nominal state, then ``P' = F P Fᵀ + Q T_s``
-        with the full error transition F of :meth:`error_transition`."""
-        F = self.error_transition(body_rate, dt)
-        w = self.platform_rate
-        step = quat_from_rotvec((body_rate - self.gyro_bias - quat_to_rotmat(self.q).T @ w) * dt)
-        q = quat_multiply(self.q, step)
+        with the full error transition F (:meth:`error_transition`)."""
+        gyro = body_rate - self.gyro_bias
+        body_R_platform = quat_to_rotmat(self.q).T  # R(q)ᵀ
+        decay = float(np.exp(-dt / self.noise.platform_rate_time_constant))
+        F = self._transition(gyro, body_R_platform, decay, dt)
+        q = quat_multiply(self.q, quat_from_rotvec((gyro - body_R_platform @ self.platform_rate) * dt))
         self.q = q / np.sqrt(q @ q)
-        self.platform_rate = w * float(np.exp(-dt / self.noise.platform_rate_time_constant))
+        self.platform_rate = self.platform_rate * decay
         P = F @ self.P @ F.T
         P[np.diag_indices(self.dim)] += self._q_density * dt
         limit_variances(P, self._variance_limit)
