@@ -36,6 +36,7 @@ from fpr_model.kinematics import jacobian_at
 from fpr_model.parameters import FprParameters
 from fpr_model.rotations import quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
 
+from fpr_control.contact_guard import ContactGuard, ContactGuardConfig
 from fpr_control.information import (
     InfoPlausibility,
     InformationTable,
@@ -151,6 +152,7 @@ class ControllerConfig:
     info_plausibility: InfoPlausibility = field(default_factory=InfoPlausibility)  # ζ_j checks (issue 12)
     own_writer_direct: bool = False  # the own ζ_i is read back from the topic it is written on (no relay)
     rejoin: RejoinConfig = field(default_factory=RejoinConfig)  # bumpless rejoin after an emergency (issue 12)
+    contact_guard: ContactGuardConfig = field(default_factory=ContactGuardConfig)  # fpr_control.contact_guard
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -228,6 +230,10 @@ class ControlOutput:
     loop_time: float = 0.0
     #: q^d tracked in this step; a hold (state_ok False) repeats the last step's, None before the first good step
     desired: DesiredState | None = None
+    #: f^d_c the law tracked [N] after the contact guard (desired.contact_force is the operator's demand)
+    applied_contact_force: float = 0.0
+    contact_guard_state: int = 0  #: fpr_control.contact_guard IDLE / PUSHING / LOST
+    contact_guard_event: str | None = None  #: one line when the guard declares the contact lost or re-arms
 
 
 class Controller:
@@ -258,6 +264,7 @@ class Controller:
         self._observer_paused = False
         self.rejoin = RejoinRamp(config.rejoin)
         self._flown = True
+        self.contact_guard = ContactGuard(config.contact_guard)
 
     #: ControllerConfig fields :meth:`reconfigure` may change in flight (ROS parameters set at run time)
     DYNAMIC_FIELDS = ("gains", "max_thrust", "max_tilt", "info_timeout")
@@ -426,6 +433,15 @@ class Controller:
             momentum, beta = observer_inputs(terms, nu, thrusts.reshape(-1))
             self.observer.update(momentum, beta, cfg.period)
         tau_hat = self.observer.estimate
+        # ---- contact guard (fpr_control.contact_guard): a force demand that finds no contact fades out
+        normal = rotation[:, 2]  # z_p in the controller frame
+        estimated_contact = float(-(normal @ tau_hat[:3]))  # −(R_pᵀ f̂_p,e)_z (3.45)
+        guard = self.contact_guard.step(
+            cmd.contact_force, estimated_contact, float(normal @ nu[:3]), cfg.period,
+            tracking=flying and active == "impedance" and not self.rejoin.suspended)
+        if guard.applied_force != cmd.contact_force:  # τ^d_e (3.43) is linear in f^d_c
+            scale = guard.applied_force / cmd.contact_force if cmd.contact_force != 0.0 else 0.0
+            desired = replace(desired, wrench=desired.wrench * scale)
 
         # ---- law
         if active != self._previous_active and active == "non_communicating":
@@ -463,6 +479,8 @@ class Controller:
             info_ages=ages, thrust_saturated=mine.thrust_saturated, tilt_saturated=mine.tilt_saturated,
             local_state_valid=local_ok, state_ok=True,
             desired=DesiredState.from_trajectory(desired, cmd.contact_force),
+            applied_contact_force=guard.applied_force, contact_guard_state=guard.state,
+            contact_guard_event=guard.event,
         )
 
     def _law(self, active: str, terms, error, nu, desired: DesiredTrajectory, tau_hat, flying) -> np.ndarray:

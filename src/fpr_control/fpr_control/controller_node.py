@@ -23,6 +23,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 
 from fpr_control.command_limits import CommandLimits, bound_command
+from fpr_control.contact_guard import LOST, STATE_NAMES, ContactGuardConfig
 from fpr_control.controller import (
     DEFAULT_GAINS,
     IMPEDANCE_FORCE_INPUTS,
@@ -115,6 +116,25 @@ class ControllerNode(Node):
             "moves from the measured legs to the command at this rate (fpr_control.rejoin)"), low=0.1, high=360.0)
         rejoin_attitude_rate = d("rejoin_attitude_rate_deg", 5.0, (
             "[deg/s] same for the platform roll and pitch reference"), low=0.1, high=360.0)
+        # contact guard (fpr_control.contact_guard): a force demand that finds no contact fades out
+        guard_defaults = ContactGuardConfig()
+        contact_guard = ContactGuardConfig(
+            enabled=bool(d("contact_guard.enabled", guard_defaults.enabled, (
+                "fade a contact-force demand (impedance) that finds no contact, instead of flying the robot along "
+                "the platform normal at f^d_c / B^d"))),
+            engage_force=float(d("contact_guard.engage_force", guard_defaults.engage_force, (
+                "[N] demands above are guarded; releasing the trigger below this re-arms the guard"),
+                low=0.0, high=100.0)),
+            min_fraction=float(d("contact_guard.min_fraction", guard_defaults.min_fraction, (
+                "contact met while the estimated contact force is at least this x the demand"),
+                low=0.01, high=1.0)),
+            max_free_travel=float(d("contact_guard.max_free_travel", guard_defaults.max_free_travel, (
+                "[m] platform travel along its normal without contact before the contact is declared lost"),
+                low=0.01, high=10.0)),
+            max_unmet_time=float(d("contact_guard.max_unmet_time", guard_defaults.max_unmet_time, (
+                "[s] time without contact before the contact is declared lost"), low=0.02, high=60.0)),
+            fade_rate=float(d("contact_guard.fade_rate", guard_defaults.fade_rate, (
+                "[N/s] ramp of the applied demand to 0 once the contact is lost"), low=0.1, high=1000.0)))
         model_file = d("model_file", "", "FprParameters YAML (empty: thesis Table B.1 defaults)")
         info_input_topic = d("info_input_topic", "/fpr/info", (
             "topic the peers' zeta_j are read from (the own zeta_i is always published on /fpr/info); set it to "
@@ -242,7 +262,8 @@ class ControllerNode(Node):
             state_source=state_source, period=1.0 / rate, info_timeout=info_timeout, max_thrust=max_thrust,
             max_tilt=math.radians(max_tilt_deg), impedance_force_input=force_input, info_plausibility=plausibility,
             own_writer_direct=own_writer_direct,
-            rejoin=RejoinConfig(math.radians(rejoin_leg_rate), math.radians(rejoin_attitude_rate)))
+            rejoin=RejoinConfig(math.radians(rejoin_leg_rate), math.radians(rejoin_attitude_rate)),
+            contact_guard=contact_guard)
         self.controller = Controller(params, self.config)
         self.n = int(n)
 
@@ -459,6 +480,10 @@ class ControllerNode(Node):
         # unused onboard estimator going blind must not land a centralized flight; a dead motion capture must)
         self._state_valid = (ground_truth is not None) if self.controller.uses_ground_truth else \
             bool(out.local_state_valid)
+        if out.contact_guard_event and out.contact_guard_state == LOST:  # one call site per severity (rclpy)
+            self.get_logger().warning(out.contact_guard_event)
+        elif out.contact_guard_event:
+            self.get_logger().info(out.contact_guard_event)
         if out.warning and not self._had_local and not self.controller.uses_ground_truth:
             self.get_logger().info(out.warning + " (start-up)", **throttle(self, LOG_THROTTLE_S))
         elif out.warning:
@@ -517,6 +542,8 @@ class ControllerNode(Node):
                 float(desired.roll), float(desired.pitch), float(desired.yaw))
             st.desired_leg_angles = [float(v) for v in desired.leg_angles]
             st.desired_contact_force = float(desired.contact_force)
+        st.applied_contact_force = float(out.applied_contact_force)
+        st.contact_guard = int(out.contact_guard_state)
         self.status_pub.publish(st)
         self._publish_diagnostics(out, stamp)
 
@@ -533,6 +560,8 @@ class ControllerNode(Node):
                                     else "no valid local state: holding")
         elif out.fallback_active:
             level, message = WARN, f"NC fallback (4.32): no fresh zeta from UAV {', '.join(map(str, stale))}"
+        elif out.contact_guard_state == LOST:
+            level, message = WARN, "contact lost: the force demand is faded to 0 until the trigger is released"
         elif out.thrust_saturated or out.tilt_saturated:
             level, message = WARN, f"{'thrust' if out.thrust_saturated else 'tilt'} saturated"
         else:
@@ -541,7 +570,9 @@ class ControllerNode(Node):
             "configured mode": self.config.mode, "active mode": out.active_mode,
             "zeta ages [s]": [float(a) for a in out.info_ages], "local state valid": bool(out.local_state_valid),
             "thrust saturated": bool(out.thrust_saturated), "tilt saturated": bool(out.tilt_saturated),
-            "loop time [ms]": 1000.0 * float(out.loop_time)})
+            "loop time [ms]": 1000.0 * float(out.loop_time),
+            "contact guard": STATE_NAMES.get(out.contact_guard_state, "?"),
+            "applied contact force [N]": float(out.applied_contact_force)})
         self.diagnostics_pub.publish(to_diagnostic_array([report], stamp))
 
 

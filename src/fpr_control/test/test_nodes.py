@@ -397,3 +397,49 @@ def test_read_only_parameters_refuse_a_runtime_set_and_keep_their_value():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_contact_guard_reported_and_said_without_breaking_the_tick():
+    """Impedance on a frozen motion capture: the wrench observer reads the platform held in place as a contact
+    building up (FOWO, K_O 2/s), so with min_fraction 1 the 10 N demand is unmet for max_unmet_time 0.3 s and
+    declared lost (ControllerStatus.contact_guard LOST, applied 0 after the fade, the operator's 10 N still
+    reported); the trigger's release re-arms it, and the control tick keeps running through both log lines (rclpy
+    refuses two severities from one call site: that once raised inside the tick)."""
+    graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
+        Parameter("uav_id", value=1), Parameter("mode", value="impedance"),
+        Parameter("state_source", value="ground_truth"), Parameter("contact_guard.max_unmet_time", value=0.3),
+        Parameter("contact_guard.min_fraction", value=1.0)])
+    try:
+        helper = graph.helper
+        statuses = []
+        helper.create_subscription(ControllerStatus, "/fpr/uav1/controller_status", statuses.append, 10)
+        truth_pub = helper.create_publisher(FprState, "/fpr/motion_capture", BEST_EFFORT)
+        teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
+        assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
+        truth = FprState()
+        truth.header.frame_id = "world"
+        truth.platform_pose.position.z = 1.0
+        truth.platform_pose.orientation.w = 1.0
+        truth.leg_angles, truth.leg_rates = [0.8] * 3, [0.0] * 3
+        truth.uav_poses = [Pose() for _ in range(3)]
+        for pose in truth.uav_poses:
+            pose.orientation.w = 1.0
+        state = {"force": 10.0}
+
+        def feed():
+            truth_pub.publish(truth)
+            teleop_pub.publish(_teleop(contact_force=state["force"]))
+
+        timer = helper.create_timer(0.02, feed)
+        assert wait_for(lambda: statuses and statuses[-1].contact_guard == ControllerStatus.CONTACT_GUARD_LOST
+                        and statuses[-1].applied_contact_force == 0.0, timeout=8.0)
+        assert statuses[-1].desired_contact_force == pytest.approx(10.0)
+        assert any(s.contact_guard == ControllerStatus.CONTACT_GUARD_PUSHING and s.applied_contact_force == 10.0
+                   for s in statuses)
+        state["force"] = 0.0
+        assert wait_for(lambda: statuses[-1].contact_guard == ControllerStatus.CONTACT_GUARD_IDLE, timeout=3.0)
+        count = len(statuses)
+        assert wait_for(lambda: len(statuses) > count + 10, timeout=3.0), "the tick stopped"
+        helper.destroy_timer(timer)
+    finally:
+        graph.close()
