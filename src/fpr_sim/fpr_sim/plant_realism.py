@@ -41,6 +41,7 @@ __all__ = ["ACTUATION_SEED_STREAM", "MISMATCH_SEED_STREAM", "THRUST_NOISE_SEED_S
 MISMATCH_SEED_STREAM = 21  #: model-mismatch draws
 ACTUATION_SEED_STREAM = 22  #: thrust-curve and per-rotor gain draws
 THRUST_NOISE_SEED_STREAM = 23  #: the thrust noise sequence
+THRUST_NOISE_COMMON_SEED_STREAM = 24  #: its part common to a UAV's rotors (drawn only when the share is > 0)
 
 
 def _generator(seed: int, stream: int) -> np.random.Generator:
@@ -128,27 +129,38 @@ def draw_actuation(scenario: Scenario) -> ActuationDraws | None:
 class ThrustNoise:
     """Multiplicative per-rotor thrust noise ``1 + σ ξ_ij``: ξ a unit-variance first-order Gauss-Markov process
     per rotor, ``ξ_{k+1} = a ξ_k + √(1 − a²) w_k``, ``a = exp(−dt/τ)``, w standard normal, started from its
-    stationary distribution (ξ_0 ~ N(0, 1)); one sample per physics step ``dt`` [s]. Samples are generated in
-    blocks of ``block`` steps (vectorized), deterministic with the seed."""
+    stationary distribution (ξ_0 ~ N(0, 1)); one sample per physics step ``dt`` [s]. With ``common`` ρ > 0,
+    ``ξ_ij = √ρ c_i + √(1 − ρ) e_ij``: c_i one process per UAV (its own random stream), e_ij the per-rotor ones
+    (the same draws as with ρ = 0). Samples are generated in blocks of ``block`` steps (vectorized),
+    deterministic with the seed."""
 
-    def __init__(self, sigma: float, time_constant: float, dt: float, n: int, seed: int, block: int = 512) -> None:
+    def __init__(self, sigma: float, time_constant: float, dt: float, n: int, seed: int, block: int = 512,
+                 common: float = 0.0) -> None:
         self.sigma = float(sigma)
         self.n = n
         self._a = math.exp(-float(dt) / float(time_constant))
         self._b = math.sqrt(1.0 - self._a * self._a)
         self._rng = _generator(seed, THRUST_NOISE_SEED_STREAM)
         self._xi = self._rng.standard_normal(4 * n)
+        self.common = float(common)
+        self._common_rng = _generator(seed, THRUST_NOISE_COMMON_SEED_STREAM) if self.common > 0.0 else None
+        self._xc = self._common_rng.standard_normal(n) if self._common_rng is not None else None
         self._block = block
         self._rows: list[list[float]] = []
 
-    def _refill(self) -> None:
-        draws = self._rng.standard_normal((self._block, 4 * self.n))
+    def _gauss_markov(self, start: np.ndarray, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         rows = np.empty_like(draws)
-        xi = self._xi
-        for k in range(self._block):
+        xi = start
+        for k in range(len(draws)):
             xi = self._a * xi + self._b * draws[k]
             rows[k] = xi
-        self._xi = xi
+        return rows, xi
+
+    def _refill(self) -> None:
+        rows, self._xi = self._gauss_markov(self._xi, self._rng.standard_normal((self._block, 4 * self.n)))
+        if self._common_rng is not None:
+            common, self._xc = self._gauss_markov(self._xc, self._common_rng.standard_normal((self._block, self.n)))
+            rows = math.sqrt(1.0 - self.common) * rows + math.sqrt(self.common) * np.repeat(common, 4, axis=1)
         self._rows = (1.0 + self.sigma * rows).tolist()[::-1]
 
     def next(self) -> list[float]:
@@ -199,7 +211,8 @@ class PlantRealism:
         self.rotor_gains = self.actuation.rotor_gains if self.actuation is not None else None
         if self.rotor_gains is not None and all(g == 1.0 for row in self.rotor_gains for g in row):
             self.rotor_gains = None
-        self.noise = (ThrustNoise(actuation.thrust_noise, actuation.thrust_noise_time_constant, dt, n, scenario.seed)
+        self.noise = (ThrustNoise(actuation.thrust_noise, actuation.thrust_noise_time_constant, dt, n, scenario.seed,
+                                  common=actuation.thrust_noise_common)
                       if actuation.enabled and actuation.thrust_noise > 0.0 else None)
         self.rotor_radius = float(aero.rotor_radius) if aero.enabled and scenario.ground.enabled else 0.0
         self.rotor_height = float(aero.rotor_height)

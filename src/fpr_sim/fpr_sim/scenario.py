@@ -517,7 +517,11 @@ class ActuationConfig:
     - per-rotor thrust gain ``k_ij = 1 + ε_ij``, ε uniform in ±``rotor_thrust_spread``: rotor j of UAV i produces
       ``k_ij T_ij`` (a moment imbalance the PX4 rate integrator must hold, (3.41) with unequal c_T);
     - thrust noise: produced thrust × ``(1 + σ ξ_ij(t))``, ξ a unit-variance first-order Gauss-Markov process per
-      rotor with time constant ``thrust_noise_time_constant``, σ = ``thrust_noise``;
+      rotor with time constant ``thrust_noise_time_constant``, σ = ``thrust_noise``; a share ρ =
+      ``thrust_noise_common`` of its variance is common to the UAV's four rotors,
+      ``ξ_ij = √ρ c_i + √(1 − ρ) e_ij`` (c_i, e_ij independent processes of the same law): an inflow disturbance
+      (the room's recirculating downwash, gusts) larger than the 25 cm between a UAV's rotors moves its collective
+      thrust, not its torques (0: independent rotors, as before);
     - ``motor_time_constant`` [s] > 0 replaces ``quadrotor.motor_time_constant`` (0: keep it);
     - ``battery_internal_resistance`` [Ω] > 0 replaces ``battery.internal_resistance`` (0: keep it).
     """
@@ -528,6 +532,7 @@ class ActuationConfig:
     rotor_thrust_spread: float = 0.0  #: ± relative [-] on each rotor's thrust gain
     thrust_noise: float = 0.0  #: σ relative [-] of the multiplicative per-rotor thrust noise
     thrust_noise_time_constant: float = 0.05  #: [s] of its Gauss-Markov process
+    thrust_noise_common: float = 0.0  #: ρ in [0, 1]: share of the thrust-noise variance common to a UAV's rotors
     motor_time_constant: float = 0.0  #: [s] first-order motor lag (0: ``quadrotor.motor_time_constant``)
     battery_internal_resistance: float = 0.0  #: [Ω] (0: ``battery.internal_resistance``)
 
@@ -903,6 +908,8 @@ def _validate_realism_physics(scenario: Scenario) -> None:
     for section, name in relative:
         if getattr(getattr(scenario, section), name) >= 1.0:
             raise ValueError(f"{section}.{name}: a relative half-width must be < 1")
+    if not 0.0 <= scenario.actuation.thrust_noise_common <= 1.0:
+        raise ValueError("actuation.thrust_noise_common: must be in [0, 1]")
     if scenario.actuation.thrust_noise > 0.0 and scenario.actuation.thrust_noise_time_constant <= 0.0:
         raise ValueError("actuation.thrust_noise_time_constant: must be > 0 with thrust_noise > 0")
 

@@ -191,6 +191,28 @@ def test_thrust_noise_is_a_unit_gauss_markov_scaled_by_sigma():
     assert correlation == pytest.approx(math.exp(-1.0), abs=0.08)
 
 
+def test_thrust_noise_common_share_correlates_a_uavs_rotors_only():
+    """ρ = 0.7: each rotor keeps σ and the time constant, two rotors of one UAV correlate by ρ, rotors of two UAVs
+    not at all, so a UAV's collective varies by σ √(ρ + (1 − ρ)/4); ρ = 0 is the former sequence, bit for bit."""
+    sigma, tau, dt, rho = 0.02, 0.05, 1e-3, 0.7
+    noise = ThrustNoise(sigma, tau, dt, 3, seed=1, common=rho)
+    samples = (np.array([noise.next() for _ in range(60000)]) - 1.0) / sigma
+    assert samples.std(axis=0) == pytest.approx(np.ones(12), abs=0.1)
+    corr = np.corrcoef(samples.T)
+    same = [corr[4 * i + j, 4 * i + k] for i in range(3) for j in range(4) for k in range(j + 1, 4)]
+    other = [corr[4 * i + j, 4 * m + k] for i in range(3) for m in range(i + 1, 3) for j in range(4) for k in range(4)]
+    assert np.mean(same) == pytest.approx(rho, abs=0.05) and max(abs(c) for c in other) < 0.15
+    collective = samples.reshape(-1, 3, 4).mean(axis=2)
+    assert collective.std(axis=0) == pytest.approx(np.full(3, math.sqrt(rho + (1 - rho) / 4)), abs=0.1)
+    # ρ = 0: the per-rotor recursion on the stream SeedSequence([seed, 23]), as before the common share existed
+    zero, a = ThrustNoise(sigma, tau, dt, 3, seed=5, common=0.0), math.exp(-dt / tau)
+    rng = np.random.default_rng(np.random.SeedSequence([5, 23]))
+    xi, draws = rng.standard_normal(12), rng.standard_normal((512, 12))
+    for k in range(512):
+        xi = a * xi + math.sqrt(1.0 - a * a) * draws[k]
+        assert zero.next() == (1.0 + sigma * xi).tolist()
+
+
 # ------------------------------------------------------------------------------------------------- aerodynamics
 def test_ground_effect_law_and_clamp():
     radius = 0.1016
