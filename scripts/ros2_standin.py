@@ -100,7 +100,12 @@ class _Graph:
         from rclpy.executors import SingleThreadedExecutor
 
         self.rclpy = rclpy
-        rclpy.init(args=['--ros-args', '--disable-stdout-logs'])
+        from rclpy.signals import SignalHandlerOptions
+
+        # Ctrl-C (and SIGTERM, main()) must reach the streaming loops as KeyboardInterrupt. With rclpy's own SIGINT
+        # handler the signal sometimes shut the context down first, and spin_once raised ExternalShutdownException
+        # (exit status 1: it once failed CI's test_topic_hz_measures_the_rate)
+        rclpy.init(args=['--ros-args', '--disable-stdout-logs'], signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f'_ros2cli_standin_{os.getpid()}', start_parameter_services=False)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
