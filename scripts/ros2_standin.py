@@ -102,9 +102,9 @@ class _Graph:
         self.rclpy = rclpy
         from rclpy.signals import SignalHandlerOptions
 
-        # Ctrl-C (and SIGTERM, main()) must reach the streaming loops as KeyboardInterrupt. With rclpy's own SIGINT
-        # handler the signal sometimes shut the context down first, and spin_once raised ExternalShutdownException
-        # (exit status 1: it once failed CI's test_topic_hz_measures_the_rate)
+        # Ctrl-C and SIGTERM must reach the streaming loops as KeyboardInterrupt (_interrupt_on_signals). With
+        # rclpy's own SIGINT handler the signal could shut the context down first, and spin_once raised
+        # ExternalShutdownException (exit status 1: it failed CI's test_topic_hz_measures_the_rate once)
         rclpy.init(args=['--ros-args', '--disable-stdout-logs'], signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f'_ros2cli_standin_{os.getpid()}', start_parameter_services=False)
         self.executor = SingleThreadedExecutor()
@@ -411,18 +411,22 @@ def _interface(argv: list[str]) -> int:
     return 0
 
 
-def _interrupt_on_sigterm() -> None:
-    """SIGTERM ends a streaming command (echo, hz) like Ctrl-C: the node leaves the graph cleanly."""
+def _interrupt_on_signals() -> None:
+    """SIGINT (Ctrl-C) and SIGTERM end a streaming command (echo, hz) as KeyboardInterrupt: the node leaves the
+    graph cleanly. Installed explicitly, whatever the inherited disposition: a process started from a
+    non-interactive shell's background job inherits SIGINT ignored, and Python then installs no handler of its own
+    (with rclpy's handler off, see _Graph, Ctrl-C would do nothing)."""
     import signal
 
     def interrupt(_signum, _frame):
         raise KeyboardInterrupt
 
+    signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
 
 
 def main(argv: list[str]) -> int:
-    _interrupt_on_sigterm()
+    _interrupt_on_signals()
     usage = ('usage: ros2 run <package> <executable> [args] | pkg prefix|executables | topic list|info|echo|hz | '
              'node list | param list|get|set | interface show')
     argv = list(argv)
