@@ -472,10 +472,9 @@ class Controller:
         info = None
         if local is not None:
             info = PeerInfo(cfg.uav_id, local.leg_angle, local.velocity.copy(), local.attitude.copy(), thrust)
-        force_platform = rotation.T @ tau_hat[:3]
         return ControlOutput(
             attitude=attitude, thrust=thrust, thrust_vectors=thrusts_full, info=info, wrench=tau_hat.copy(),
-            contact_force=float(-force_platform[2]), active_mode=active, fallback_active=fallback,
+            contact_force=estimated_contact, active_mode=active, fallback_active=fallback,
             info_ages=ages, thrust_saturated=mine.thrust_saturated, tilt_saturated=mine.tilt_saturated,
             local_state_valid=local_ok, state_ok=True,
             desired=DesiredState.from_trajectory(desired, cmd.contact_force),

@@ -94,6 +94,19 @@ def _teleop(n=3, roll=0.0, nan=False, pitch=0.0, contact_force=0.0):
     return msg
 
 
+def _still_motion_capture(x: float, y: float, z: float) -> FprState:
+    """A motionless FprState in F0: the platform level at (x, y, z) [m], legs 0.8 rad, UAVs at identity."""
+    truth = FprState()
+    truth.header.frame_id = "world"
+    truth.platform_pose.position.x, truth.platform_pose.position.y, truth.platform_pose.position.z = x, y, z
+    truth.platform_pose.orientation.w = 1.0
+    truth.leg_angles, truth.leg_rates = [0.8] * 3, [0.0] * 3
+    truth.uav_poses = [Pose() for _ in range(3)]
+    for pose in truth.uav_poses:
+        pose.orientation.w = 1.0
+    return truth
+
+
 def test_controller_node_fallback_and_bad_input():
     graph = Graph(ControllerNode, namespace="/fpr/uav1", parameter_overrides=[
         Parameter("uav_id", value=1), Parameter("mode", value="communicating"),
@@ -171,15 +184,7 @@ def test_controller_node_reports_the_centralized_desired_state():
         truth_pub = helper.create_publisher(FprState, "/fpr/motion_capture", BEST_EFFORT)
         teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
-        truth = FprState()
-        truth.header.frame_id = "world"
-        truth.platform_pose.position.x, truth.platform_pose.position.y, truth.platform_pose.position.z = \
-            0.2, -0.1, 1.0
-        truth.platform_pose.orientation.w = 1.0
-        truth.leg_angles, truth.leg_rates = [0.8] * 3, [0.0] * 3
-        truth.uav_poses = [Pose() for _ in range(3)]
-        for pose in truth.uav_poses:
-            pose.orientation.w = 1.0
+        truth = _still_motion_capture(0.2, -0.1, 1.0)
         teleop = _teleop(roll=0.03)
         teleop.platform_velocity.x = 0.2
 
@@ -416,14 +421,7 @@ def test_contact_guard_reported_and_said_without_breaking_the_tick():
         truth_pub = helper.create_publisher(FprState, "/fpr/motion_capture", BEST_EFFORT)
         teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", 10)
         assert wait_for(lambda: truth_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0)
-        truth = FprState()
-        truth.header.frame_id = "world"
-        truth.platform_pose.position.z = 1.0
-        truth.platform_pose.orientation.w = 1.0
-        truth.leg_angles, truth.leg_rates = [0.8] * 3, [0.0] * 3
-        truth.uav_poses = [Pose() for _ in range(3)]
-        for pose in truth.uav_poses:
-            pose.orientation.w = 1.0
+        truth = _still_motion_capture(0.0, 0.0, 1.0)
         state = {"force": 10.0}
 
         def feed():
