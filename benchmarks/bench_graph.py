@@ -10,6 +10,14 @@ n = 6, ``--seconds`` simulated from the start (default 12). Run on a quiet machi
 
 Prints one line per case (wall, CPU, RTF, lockstep timeouts, the executor's entity count, the machine's load
 average before and after) and the ratios of each lever against the baseline of its case.
+
+``--overlap`` prices issue 15's overlapped two-process layout (the simulator beside the graph) before building
+it: the default runner is flown with the CPU of every /clock period split into the simulator's step and the
+graph's drains (``InProcessGraph(measure_periods=True)``), and :func:`overlap_bound` replays those costs on two
+processes with no communication cost at all, under the lockstep rule (the simulator passes a control boundary
+only with the setpoints computed on it) and pipelined (the controllers compute on the /clock before each
+boundary: one period of added latency). A second flight prices what crossing DDS costs the simulator's messages
+(``simulator_through_dds``: still one process, so a lower bound of the crossing between two).
 """
 
 from __future__ import annotations
@@ -67,8 +75,34 @@ def _entities(graph: InProcessGraph) -> int:
     return total
 
 
+def overlap_bound(period_costs: list[tuple[float, float, float]], control_rate: float = 50.0,
+                  lag: int = 0) -> float:
+    """Speed-up bound of running the simulator and the graph in two processes: ``period_costs`` = (simulation
+    time T_k [s], simulator CPU s_k [s] of the step ending at T_k, graph CPU g_k [s] of the drains on T_k), one per
+    /clock period, as :class:`InProcessGraph` measures them. Schedule: the graph's g_k starts when step k is done
+    and g_(k-1) is; the simulator's step k+1 starts when step k is done and, if T_k is a control boundary (a
+    multiple of 1 / ``control_rate``), when the graph has computed that boundary's setpoints: g_k with ``lag`` 0
+    (the lockstep rule), g_(k-1) with ``lag`` 1 (the controllers compute on the /clock before each boundary).
+    Returns Σ(s_k + g_k) / the schedule's makespan (communication free: an upper bound)."""
+    if lag not in (0, 1):
+        raise ValueError(f"lag must be 0 or 1, got {lag}")
+    sim_done = 0.0
+    graph_done = [0.0, 0.0]  # g_(k-1), g_(k-2) finished at
+    previous_time = None
+    for time_k, sim_cost, graph_cost in period_costs:
+        start = sim_done
+        if previous_time is not None and abs(previous_time * control_rate - round(previous_time * control_rate)) < 1e-6:
+            start = max(start, graph_done[lag])
+        sim_done = start + sim_cost
+        graph_done = [max(graph_done[0], sim_done) + graph_cost, graph_done[0]]
+        previous_time = time_k
+    serial = sum(s + g for _, s, g in period_costs)
+    return serial / graph_done[0] if graph_done[0] > 0.0 else 1.0
+
+
 def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
-             realism: str = "ideal", executor: str = "sweep") -> dict:
+             realism: str = "ideal", executor: str = "sweep", simulator_through_dds: bool = False,
+             measure_periods: bool = False) -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -79,7 +113,8 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
                            parameters={"simulator": {"clock_rate": clock_rate}, **model}, realism=realism)
     load_before = os.getloadavg()[0]
     with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
-                        executor=executor if deterministic else None) as graph:
+                        executor=executor if deterministic else None, simulator_through_dds=simulator_through_dds,
+                        measure_periods=measure_periods) as graph:
         graph.wait_for_discovery()
         entities = _entities(graph)
         wall, cpu = time.monotonic(), _cpu()
@@ -87,7 +122,9 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
         wall, cpu = time.monotonic() - wall, _cpu() - cpu
         simulated = graph.sim_time
         timeouts = graph.lockstep_timeouts
-    return {"case": case, "lean": lean, "clock_rate": clock_rate, "simulated": simulated, "wall": wall, "cpu": cpu,
+        period_costs = list(graph.period_costs)
+    return {"period_costs": period_costs,
+            "case": case, "lean": lean, "clock_rate": clock_rate, "simulated": simulated, "wall": wall, "cpu": cpu,
             "rtf": simulated / wall, "cpu_per_sim_s": cpu / simulated, "timeouts": timeouts, "entities": entities,
             "load": (load_before, os.getloadavg()[0])}
 
@@ -98,7 +135,12 @@ def main() -> None:
     parser.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
     parser.add_argument("--levers", default="all", help="'all' or comma-separated lever numbers (0 = baseline): "
                         + "; ".join(f"{k} {name}" for k, name in enumerate(LEVERS)))
+    parser.add_argument("--overlap", action="store_true", help="price the overlapped two-process layout (module "
+                        "doc) instead of the levers")
     args = parser.parse_args()
+    if args.overlap:
+        overlap(args.cases.split(","), args.seconds)
+        return
     levers = list(LEVERS.items())
     if args.levers != "all":
         levers = [levers[int(k)] for k in args.levers.split(",")]
@@ -113,6 +155,26 @@ def main() -> None:
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
                   flush=True)
+
+
+def overlap(cases: list[str], seconds: float) -> None:
+    """``--overlap``: per case, the default runner with its per-period costs, the bounds of the two-process layout,
+    and the same flight with the simulator's messages through DDS (module doc)."""
+    print(f"# bench_graph --overlap: {seconds:.0f} s simulated per run, {os.cpu_count()} cores, load average "
+          f"{os.getloadavg()[0]:.2f}", flush=True)
+    for case in cases:
+        r = run_case(case, True, True, 100.0, seconds, measure_periods=True)
+        dds = run_case(case, True, True, 100.0, seconds, simulator_through_dds=True)
+        costs = r["period_costs"]
+        sim_cpu = sum(s for _, s, _ in costs) / r["simulated"]
+        graph_cpu = sum(g for _, _, g in costs) / r["simulated"]
+        strict, pipelined = overlap_bound(costs, lag=0), overlap_bound(costs, lag=1)
+        crossing = dds["rtf"] / r["rtf"]
+        print(f"{case:12s} RTF {r['rtf']:5.2f}  CPU/sim-s: simulator {sim_cpu:5.3f} graph {graph_cpu:5.3f}  "
+              f"two processes, free communication: x{strict:4.2f} lockstep rule, x{pipelined:4.2f} pipelined  "
+              f"simulator through DDS: RTF {dds['rtf']:5.2f} (x{crossing:4.2f})  "
+              f"-> at most RTF {r['rtf'] * strict * crossing:5.2f} / {r['rtf'] * pipelined * crossing:5.2f}  "
+              f"load {r['load'][0]:.2f}->{dds['load'][1]:.2f}", flush=True)
 
 
 if __name__ == "__main__":

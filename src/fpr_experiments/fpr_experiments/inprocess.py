@@ -60,7 +60,8 @@ class InProcessGraph:
 
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
-                 real_time_factor: float | None = None, verify_delivery: bool = False) -> None:
+                 real_time_factor: float | None = None, verify_delivery: bool = False,
+                 simulator_through_dds: bool = False, measure_periods: bool = False) -> None:
         """``executor``: "sweep" (in-process delivery), "sweep-dds" (the sweep with every message through DDS),
         "sweep-copy" (through DDS, and converting each message once per subscription, as rclpy does, instead of once
         per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
@@ -69,7 +70,11 @@ class InProcessGraph:
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
         view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter.
         ``verify_delivery`` (tests): the in-process delivery checks that no message changes after it was published
-        (fpr_experiments.intra_process; it copies every message, slower)."""
+        (fpr_experiments.intra_process; it copies every message, slower). ``simulator_through_dds`` (benchmarks):
+        the sweep does not deliver the simulator's messages in process, they cross DDS as they would from a
+        process of their own. ``measure_periods`` (benchmarks, deterministic mode): :attr:`period_costs` gets one
+        (simulation time [s], simulator CPU [s], graph CPU [s]) per /clock period, thread CPU time of the step
+        and of the drains that follow it."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
@@ -79,6 +84,10 @@ class InProcessGraph:
             raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
         self.verify_delivery = verify_delivery
+        self.simulator_through_dds = simulator_through_dds
+        self.measure_periods = measure_periods
+        #: with ``measure_periods``: (simulation time [s], simulator CPU [s], graph CPU [s]) per /clock period
+        self.period_costs: list[tuple[float, float, float]] = []
         self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
         if real_time_factor is None and deterministic and live_view is None:
             real_time_factor = 0.0
@@ -128,7 +137,7 @@ class InProcessGraph:
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)
-            if self.simulator is not None:
+            if self.simulator is not None and not self.simulator_through_dds:
                 self._sweep.add_publisher_node(self.simulator)
         else:
             self._executor = SingleThreadedExecutor(context=self.context)
@@ -167,11 +176,17 @@ class InProcessGraph:
         return drain_rclpy_executor(self._executor, self.errors)
 
     def _deterministic_step(self) -> None:
+        if self.measure_periods:
+            start = time.thread_time()
         self.simulator.step()
+        if self.measure_periods:
+            stepped = time.thread_time()
         self.drain()
         for bridge in self._bridges:
             bridge.receive_pending()
         self.drain()
+        if self.measure_periods:
+            self.period_costs.append((self.sim_time, stepped - start, time.thread_time() - stepped))
 
     def node(self, fully_qualified_name: str) -> Node:
         return self.by_name[fully_qualified_name]
