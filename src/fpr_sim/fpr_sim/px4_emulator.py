@@ -372,6 +372,8 @@ class Px4Emulator:
         self.thrust = 0.0
         self.rate_feedforward = np.zeros(3)
         self.rate_mode = False
+        #: attitude setpoints in flight on the command uplink (Px4Config.command_latency): (due time [s], setpoint)
+        self._uplink: deque[tuple[float, tuple]] = deque()
         #: the offboard setpoint kind last received: "attitude" (SET_ATTITUDE_TARGET) or "position"
         self.offboard_kind = "attitude"
         self.position_target: PositionTarget | None = None
@@ -514,17 +516,34 @@ class Px4Emulator:
             rates = np.zeros(3)
         self._offboard_setpoint_received(int(msg.time_boot_ms))
         self.offboard_kind = "attitude"
-        if not mask & THROTTLE_IGNORE:
-            self.thrust = min(1.0, max(0.0, thrust))
         ignore = np.array([mask & BODY_ROLL_RATE_IGNORE, mask & BODY_PITCH_RATE_IGNORE, mask & BODY_YAW_RATE_IGNORE])
         rates_flu = flu_to_frd(np.where(ignore != 0, 0.0, rates))  # FRD <-> FLU is its own inverse
-        if attitude_used:
-            self.quat_local = quat_ned_frd_to_enu_flu(q_ned / np.linalg.norm(q_ned))
+        setpoint = (None if mask & THROTTLE_IGNORE else min(1.0, max(0.0, thrust)),
+                    quat_ned_frd_to_enu_flu(q_ned / np.linalg.norm(q_ned)) if attitude_used else None,
+                    not (mask & BODY_ROLL_RATE_IGNORE and mask & BODY_PITCH_RATE_IGNORE), rates_flu)
+        latency = self.config.command_latency
+        if latency > 0.0:
+            self._uplink.append((self.time + latency, setpoint))
+        else:
+            self._apply_attitude_setpoint(setpoint)
+
+    def _apply_attitude_setpoint(self, setpoint: tuple) -> None:
+        thrust, quat_local, rates_used, rates_flu = setpoint
+        if thrust is not None:
+            self.thrust = thrust
+        if quat_local is not None:
+            self.quat_local = quat_local
             self.rate_mode = False
             self.rate_feedforward = np.array([0.0, 0.0, rates_flu[2]])
-        elif not (mask & BODY_ROLL_RATE_IGNORE and mask & BODY_PITCH_RATE_IGNORE):
+        elif rates_used:
             self.rate_mode = True
             self.rate_feedforward = rates_flu
+
+    def _release_uplink(self, sim_time: float) -> None:
+        """Apply the attitude setpoints whose command-uplink latency has passed (in arrival order)."""
+        uplink = self._uplink
+        while uplink and uplink[0][0] <= sim_time + 1e-9:
+            self._apply_attitude_setpoint(uplink.popleft()[1])
 
     def _handle_position_target(self, msg) -> None:
         """SET_POSITION_TARGET_LOCAL_NED (module doc): position / velocity / acceleration / yaw, NED -> F0i ENU."""
@@ -925,6 +944,8 @@ class Px4Emulator:
         """
         self.time = sim_time
         cfg = self.config
+        if self._uplink:
+            self._release_uplink(sim_time)
         self.position_local = None if position_local is None else np.asarray(position_local, dtype=float)
         self.velocity_local = None if velocity_local is None else np.asarray(velocity_local, dtype=float)
         q_local_world = self._q_world_from_local * np.array([1.0, -1.0, -1.0, -1.0])

@@ -131,6 +131,11 @@ class Px4Config:
     rate_integrator_limit: float = 0.3  #: |K_I ∫ε| bound [N m]
     max_rate: list[float] = field(default_factory=lambda: [3.8, 3.8, 3.5])  #: rate setpoint limits [rad/s]
     controller_rate: float = 250.0  #: attitude/rate loop [Hz]
+    #: [s] command uplink: an attitude / thrust setpoint takes effect this long after it reached the PX4 (the
+    #: lockstep still counts it on arrival). The thesis's Ch. 3 set-up ran its controller on a ground computer and
+    #: sent the commands over 5 GHz Wi-Fi and ROS 2 to each UAV's companion computer, then to the Pixhawk
+    #: (l.4957-4959, l.9814-9820); 0: the command takes effect on arrival
+    command_latency: float = 0.0
     #: COM_OF_LOSS_T [s]: offboard signal = a setpoint younger than this. The FPR's PX4s: 0.5 s (PX4's default
     #: 1.0 s, range 0-60; older trees 0.5): a UAV whose bridge died flies its last attitude until then, and the
     #: legs start to fold within it (docs/safety.md: bridge killed, tilt 33.5° with 1 s, 19.4° with 0.5 s)
@@ -826,6 +831,10 @@ def scenario_from_dict(data: dict | None, realism: str | None = None) -> Scenari
         raise ValueError(f"joint_stops: need 0 <= lower < upper <= π [rad] and stiffness, damping >= 0, got {stops}")
     if scenario.px4.controller_rate <= 0.0 or scenario.cameras.rate <= 0.0:
         raise ValueError("px4.controller_rate and cameras.rate must be > 0")
+    latency = scenario.px4.command_latency
+    if not (math.isfinite(latency) and 0.0 <= latency < scenario.px4.offboard_loss_timeout):
+        raise ValueError(f"px4.command_latency: must be finite, >= 0 and below px4.offboard_loss_timeout "
+                         f"({scenario.px4.offboard_loss_timeout} s) [s], got {latency}")
     _validate_sensors(scenario.sensors, scenario.cameras, scenario.motion_capture)
     return scenario
 

@@ -442,3 +442,37 @@ def test_auto_land_of_the_whole_fpr_from_2_m_ends_resting_and_disarmed():
         sim.close()
         for client in clients:
             client.close()
+
+
+@pytest.mark.parametrize("latency", [0.0, 0.02])
+def test_command_latency_delays_the_setpoint_taking_effect_not_its_arrival(latency):
+    """px4.command_latency L: an attitude/thrust setpoint flies from its arrival + L (the emulator's 250 Hz
+    updates, 4 ms apart: 20 ms is five of them); its stamp (the lockstep's and the offboard signal's) counts on
+    arrival; L = 0 applies it on arrival."""
+    client = _listening_client()
+    scenario = scenario_from_dict({"initial_state": {"mode": "ground"}, "px4": {"command_latency": latency}})
+    sim = _simulation(scenario, client)
+    try:
+        _connect(client, sim)
+        emulator = sim.emulators[0]
+        assert emulator.thrust == 0.0
+        _setpoint(client, thrust=0.3)
+        arrival = effect = None
+        for _ in range(200):
+            sim.step()  # 1 ms
+            if arrival is None and emulator.setpoint_time_ms is not None:
+                arrival = emulator.time  # the poll of the PX4 update that read it (stamped on arrival)
+            if effect is None and emulator.thrust != 0.0:
+                effect = emulator.time
+        assert arrival is not None and effect is not None
+        assert effect == pytest.approx(arrival + latency, abs=1e-9)
+        assert emulator.thrust == pytest.approx(0.3, abs=1e-6)
+    finally:
+        sim.close()
+        client.close()
+
+
+def test_command_latency_is_validated():
+    for bad in (-0.01, float("nan"), 0.5):
+        with pytest.raises(ValueError, match="command_latency"):
+            scenario_from_dict({"px4": {"command_latency": bad}})
