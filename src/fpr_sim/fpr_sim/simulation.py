@@ -146,6 +146,7 @@ class Simulation:
         #: set by a signal handler (the simulator node): the lockstep's wait gives up, the owner's loop ends
         self.stop_requested = False
         self._truth = truth
+        self._truth_steps: int | None = None  # plant.steps of ``_truth``; None: recompute (the start changes the plant)
         if scenario.initial_state.mode == "hover" and scenario.initial_state.armed:
             self._start_hovering()
         # PX4 reports its status (battery voltage included) from boot: every stream's first message goes out at
@@ -182,7 +183,14 @@ class Simulation:
             emulator.close()
 
     def ground_truth(self) -> GroundTruth:
-        return self.plant.ground_truth()
+        """The plant's true state now, evaluated once per physics step: the step's telemetry and the simulator
+        node's publishers at the end of a /clock period (ground truth, /tf, motion capture, cameras) share it.
+        Only :meth:`step` changes the plant between two calls; the object is read-only to its users."""
+        steps = self.plant.steps
+        if self._truth_steps != steps:
+            self._truth = self.plant.ground_truth()
+            self._truth_steps = steps
+        return self._truth
 
     def _landed(self) -> np.ndarray:
         anchors = self.plant.environment.ground.anchors[: self.n, 0]
@@ -223,8 +231,7 @@ class Simulation:
             if not due and not emulator.has_requests:
                 continue
             if truth is None:
-                truth = self.plant.ground_truth()
-                self._truth = truth
+                truth = self.ground_truth()
             sample = None
             if emulator.needs_sample(due):
                 sample = self.sensors.sample(i, truth.uav_quats[i], truth.uav_rates[i], truth.uav_specific_forces[i],
