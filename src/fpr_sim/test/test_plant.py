@@ -101,6 +101,31 @@ def test_hover_start_holds_the_hover_thrust_with_the_battery_under_load():
         sim.close()
 
 
+def test_simulation_ground_truth_is_evaluated_once_per_step_and_never_stale():
+    """Simulation.ground_truth(): one evaluation per physics step, shared (the telemetry and the node's
+    publishers); equal to a fresh evaluation at every step, the hover start's truth included (the start changes
+    the plant after the first evaluation)."""
+    from fpr_sim.simulation import Simulation, SimulationOptions
+
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "armed": True}, "ground": {"enabled": False},
+                                   "cameras": {"enabled": False}, "wind": {"velocity": [2.0, 0.0, 0.0]}})
+    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=False))
+    try:
+        for _ in range(12):
+            shared = sim.ground_truth()
+            assert sim.ground_truth() is shared  # the same object within a step
+            fresh = sim.plant.ground_truth()
+            assert shared.time == fresh.time == sim.time
+            for name in ("uav_positions", "uav_quats", "uav_velocities", "uav_rates", "uav_specific_forces",
+                         "uav_thrusts", "external_wrench", "battery_voltages"):
+                np.testing.assert_array_equal(getattr(shared, name), getattr(fresh, name), err_msg=name)
+            np.testing.assert_array_equal(shared.state.configuration(), fresh.state.configuration())
+            sim.step()
+            assert sim.ground_truth() is not shared  # a new step, a new evaluation
+    finally:
+        sim.close()
+
+
 def _folding_run(stops: dict, seconds: float = 3.0, kernel: str | None = None):
     """Hovering at legs 60°, no ground, every PX4 flying LEVEL at 90 % of its hover share (what a per-UAV
     AUTO.LAND does): the legs lose the inward thrust component that held them and fold. Returns the plant and
