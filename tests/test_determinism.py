@@ -12,7 +12,8 @@ nothing either: the same flight with a conversion per subscription ("sweep-copy"
 ground truth. Nor does the in-process delivery (fpr_experiments.intra_process, the default): the same flight with
 every message through DDS ("sweep-dds") gives the same ground truth, and the loaded flight runs with the delivery's
 check that no message changes after it was published (a publisher reusing its message, a subscriber modifying
-what it received: the run raises).
+what it received: the run raises). Nor do the overlap benchmark's options (the simulator's messages through DDS,
+the per-period CPU measurement).
 """
 
 from __future__ import annotations
@@ -38,22 +39,24 @@ def _burn(stop_at: float) -> None:
         x = (x * 1103515245 + 12345) % 2 ** 31
 
 
-def _fly(executor: str | None = None, verify_delivery: bool = False) -> dict[str, np.ndarray]:
+def _fly(executor: str | None = None, verify_delivery: bool = False, **runner_options) -> dict[str, np.ndarray]:
     experiment = load_experiment("takeoff_landing")
     variant = experiment.variants[0]
     specs = describe_graph(graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3))
     with InProcessGraph(specs, recorded_topics(3), deterministic=True, executor=executor,
-                        verify_delivery=verify_delivery) as graph:
+                        verify_delivery=verify_delivery, **runner_options) as graph:
         graph.wait_for_discovery()
         assert graph.run_until(lambda: graph.sim_time >= SECONDS - 1e-9, wall_timeout=300.0)
         assert graph.wait_for_recorder()
         recording = graph.recorder.snapshot()
         assert graph.errors == []
+        period_costs = np.array(graph.period_costs).reshape(-1, 3)
     truth = flight_record(recording, 3).truth
     setpoints = np.array([[m.header.stamp.sec, m.header.stamp.nanosec, m.attitude.w, m.attitude.x, m.attitude.y,
                            m.attitude.z, m.thrust] for i in (1, 2, 3) for m in recording.get(f"/fpr/uav{i}/setpoint")])
     return {"t": truth.t, "position": truth.position, "quat": truth.quat, "legs": truth.legs,
-            "thrusts": truth.thrusts, "uav_positions": truth.uav_positions, "setpoints": setpoints}
+            "thrusts": truth.thrusts, "uav_positions": truth.uav_positions, "setpoints": setpoints,
+            "period_costs": period_costs}
 
 
 @pytest.fixture(scope="module")
@@ -119,3 +122,17 @@ def test_sharing_one_message_among_subscribers_changes_nothing(flights):
 def test_in_process_delivery_changes_nothing(flights):
     quiet, _ = flights
     _assert_same_flight(quiet, _fly(executor="sweep-dds"))
+
+
+def test_simulator_messages_through_dds_and_period_measurement_change_nothing(flights):
+    """benchmarks/bench_graph.py --overlap: the simulator's messages crossing DDS (as from a process of its own) and
+    the per-period CPU measurement leave the flight as it is; one (time, simulator CPU, graph CPU) per /clock
+    period (100 Hz)."""
+    quiet, _ = flights
+    measured = _fly(simulator_through_dds=True, measure_periods=True)
+    _assert_same_flight(quiet, measured)
+    costs = measured["period_costs"]
+    assert len(quiet["period_costs"]) == 0
+    assert len(costs) == round(100 * SECONDS)
+    np.testing.assert_allclose(costs[:, 0], np.arange(1, len(costs) + 1) * 0.01, atol=1e-9)
+    assert np.all(costs[:, 1:] >= 0.0) and costs[:, 1].sum() > 0.0 and costs[:, 2].sum() > 0.0
