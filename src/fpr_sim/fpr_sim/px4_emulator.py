@@ -922,6 +922,11 @@ class Px4Emulator:
         return LANDED_STATE_IN_AIR
 
     @property
+    def flies_body_rates(self) -> bool:
+        """Offboard body-rate setpoints: the attitude loop is bypassed (its setpoint is the current attitude)."""
+        return self.offboard and self.offboard_kind == "attitude" and self.rate_mode
+
+    @property
     def uses_position_control(self) -> bool:
         """The present mode flies on the position controller (it needs the local position in :meth:`update`)."""
         if self.offboard:

@@ -196,6 +196,14 @@ class SensorConfig:
     accel_bias: float = 0.0  #: [m/s²] 1σ per axis of the per-UAV turn-on accelerometer bias draw (0: none)
     gyro_bias_random_walk: float = 0.0  #: [rad/s/√s] gyro bias random-walk density (PX4 EKF2_GYR_B_NOISE)
     accel_bias_random_walk: float = 0.0  #: [m/s²/√s] accelerometer bias random-walk density (EKF2_ACC_B_NOISE)
+    #: [-] share of the horizontal accelerometer bias left in PX4's attitude estimate: its tilt estimate aligns the
+    #: measured specific force with the vertical, so an unestimated bias b tilts it by δ = (b_y, −b_x, 0)/g (body,
+    #: rad). PX4 then tracks and reports q̂ = q ∘ exp(δ) (fpr_sim.sensors.UavSensors.attitude_estimate_error).
+    #: 0: EKF2 estimates the bias away (the former plant); 1: unobserved (no horizontal aiding of EKF2)
+    tilt_from_accel_bias: float = 0.0
+    #: [rad] 1σ per tilt axis (body x, y) of each UAV's constant misalignment between the IMU frame PX4 controls
+    #: and reports and the rotors' thrust axis (frame, motor mounts, autopilot mounting): δ gets this draw too
+    imu_misalignment: float = 0.0
 
 
 @dataclass
@@ -854,7 +862,8 @@ def _validate_sensors(sensors: SensorConfig, cameras: CameraConfig, mocap: Motio
             value = getattr(config, name)
             if not (value >= 0.0 and math.isfinite(value)):
                 raise ValueError(f"{group}.{name}: must be finite and >= 0, got {value}")
-    for group, config, name in (("cameras", cameras, "occlusion_probability"),
+    for group, config, name in (("sensors", sensors, "tilt_from_accel_bias"),
+                                ("cameras", cameras, "occlusion_probability"),
                                 ("cameras", cameras, "detection_probability"),
                                 ("motion_capture", mocap, "dropout_probability")):
         if not 0.0 <= getattr(config, name) <= 1.0:

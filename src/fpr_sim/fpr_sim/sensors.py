@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from fpr_model.parameters import default_parameters
 from fpr_model.rotations import quat_from_rotvec, quat_multiply, quat_to_rotmat
 
 from fpr_sim.plant import GroundTruth
@@ -44,7 +45,8 @@ class ImuSample:
 class UavSensors:
     """Sensors of all n UAVs (see the module doc)."""
 
-    def __init__(self, scenario: Scenario, origins: np.ndarray) -> None:
+    def __init__(self, scenario: Scenario, origins: np.ndarray, gravity: float | None = None) -> None:
+        """``gravity`` [m/s²]: the plant's (None: Table B.1's, fpr_model.parameters)."""
         self.config: SensorConfig = scenario.sensors
         n = scenario.n
         seeds = np.random.SeedSequence(scenario.seed).spawn(n)
@@ -56,6 +58,16 @@ class UavSensors:
         self.accel_bias = np.array([rng.normal(0.0, self.config.accel_bias, 3) if self.config.accel_bias > 0.0
                                     else np.zeros(3) for rng in self.bias_rngs])
         self._bias_time = np.full(n, np.nan)  # [s] instant each UAV's bias was last advanced to
+        misalignment_seeds = np.random.SeedSequence([scenario.seed, 17]).spawn(n)
+        #: [rad] per UAV: the IMU frame's constant tilt off the thrust axis (body x, y; SensorConfig.imu_misalignment)
+        self.imu_misalignment = np.array([
+            np.random.default_rng(s).normal(0.0, self.config.imu_misalignment, 3) * np.array([1.0, 1.0, 0.0])
+            if self.config.imu_misalignment > 0.0 else np.zeros(3) for s in misalignment_seeds])
+        #: per UAV: R(μ_i), IMU frame -> thrust-axis body frame (None: no misalignment)
+        self._misalignment_R = ([quat_to_rotmat(quat_from_rotvec(m)) for m in self.imu_misalignment]
+                                if self.config.imu_misalignment > 0.0 else None)
+        #: [m/s²] what the accelerometer reads at rest (the plant's gravity)
+        self.gravity = float(default_parameters(n).gravity if gravity is None else gravity)
         self.yaw_offsets = np.array([float(per_uav(scenario.px4.yaw_offsets, i)) for i in range(n)])
         self.origins = np.array(origins, dtype=float)
         half = 0.5 * self.yaw_offsets
@@ -77,6 +89,19 @@ class UavSensors:
         self.gyro_bias[i] += c.gyro_bias_random_walk * np.sqrt(dt) * xi[:3]
         self.accel_bias[i] += c.accel_bias_random_walk * np.sqrt(dt) * xi[3:]
 
+    def attitude_estimate_error(self, i: int) -> np.ndarray | None:
+        """δ_i [rad] (rotation vector in the thrust-axis body frame FLU of the plant) of the attitude UAV i's PX4
+        controls and reports, q̂ = q ∘ exp(δ): its IMU frame's misalignment (``imu_misalignment``, constant) plus
+        the tilt that the unestimated share ``tilt_from_accel_bias`` of the current accelerometer bias implies (at
+        rest the accelerometer reads g û_b + b, û_b the vertical in the body frame; aligning the estimated vertical
+        with it tilts the estimate by (b_y, −b_x, 0) / g, first order). None when both are off."""
+        c = self.config
+        if c.tilt_from_accel_bias <= 0.0 and c.imu_misalignment <= 0.0:
+            return None
+        bx, by, _ = self.accel_bias[i]
+        share = c.tilt_from_accel_bias
+        return self.imu_misalignment[i] + np.array([share * by / self.gravity, -share * bx / self.gravity, 0.0])
+
     def sample(self, i: int, quat_world: np.ndarray, rate: np.ndarray, specific_force: np.ndarray,
                position_world: np.ndarray, velocity_world: np.ndarray, t: float | None = None) -> ImuSample:
         """Noisy measurement of UAV i (0-based) from its true state (world ENU, body FLU) at ``t`` [s] (simulation
@@ -86,6 +111,12 @@ class UavSensors:
             self.advance_biases(i, float(t))
         rng = self.rngs[i]
         noise_rot = quat_from_rotvec(rng.normal(0.0, c.attitude_noise, 3))
+        error = self.attitude_estimate_error(i)
+        if error is not None:  # PX4 reports its estimate q̂ = q ∘ exp(δ)
+            quat_world = quat_multiply(quat_world, quat_from_rotvec(error))
+        if self._misalignment_R is not None:  # the IMU measures in its own frame: R(μ)ᵀ (body -> IMU)
+            rate = self._misalignment_R[i].T @ rate
+            specific_force = self._misalignment_R[i].T @ specific_force
         quat_local = quat_multiply(quat_multiply(self.world_to_local[i], quat_world), noise_rot)
         R = self.world_to_local_R[i]
         return ImuSample(

@@ -60,6 +60,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from fpr_model.rotations import quat_from_rotvec, quat_multiply
 
 from fpr_sim.plant import GroundTruth, Plant
 from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator, boot_time_ms
@@ -115,7 +116,7 @@ class Simulation:
         n = scenario.n
         self.n = n
         truth = self.plant.ground_truth()
-        self.sensors = UavSensors(scenario, truth.uav_positions)
+        self.sensors = UavSensors(scenario, truth.uav_positions, gravity=self.plant.params.gravity)
         options = self.options
         if options.remote_ports and len(options.remote_ports) != n:
             raise ValueError(f"remote_ports: expected {n} ports, got {list(options.remote_ports)}")
@@ -214,7 +215,13 @@ class Simulation:
                 setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i], positions[i], velocities[i])
             else:
                 setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i])
-            quats.append(setpoint.quat)
+            quat = setpoint.quat
+            error = self.sensors.attitude_estimate_error(i)
+            if error is not None and not emulator.flies_body_rates:
+                # PX4 tracks its estimate q̂ = q ∘ exp(δ): the true attitude settles at q_d ∘ exp(−δ) (the same
+                # equilibrium; the loop's error vector differs by a rotation of δ, second order)
+                quat = quat_multiply(quat, quat_from_rotvec(-error))
+            quats.append(quat)
             thrusts.append(setpoint.thrust)
             armed.append(setpoint.armed)
             feedforward.append(setpoint.rate_feedforward)

@@ -68,6 +68,93 @@ def test_accel_bias_shifts_only_the_accelerometer_by_a_constant():
     assert np.allclose(offset, offset[0], atol=1e-12) and 0.0 < np.abs(offset[0]).max() < 0.5
 
 
+def test_tilt_from_accel_bias_is_the_accelerometer_s_view_of_the_vertical():
+    """sensors.tilt_from_accel_bias: PX4's attitude estimate q̂ = q ∘ exp(δ), δ = share · (b_y, −b_x, 0) / g; the
+    reported attitude carries it; off (0), nothing changes."""
+    assert _imu({"accel_bias": 0.1}).attitude_estimate_error(0) is None
+    sensors = _imu({"accel_bias": 0.1, "tilt_from_accel_bias": 0.5, "attitude_noise": 0.0})
+    for i in range(3):
+        bx, by, _ = sensors.accel_bias[i]
+        assert sensors.attitude_estimate_error(i) == pytest.approx(0.5 * np.array([by, -bx, 0.0]) / 9.81, abs=1e-15)
+    # the estimate's vertical, seen in its own body frame, is the direction of the measured specific force at rest
+    full = _imu({"accel_bias": 0.1, "tilt_from_accel_bias": 1.0, "attitude_noise": 0.0, "accel_noise": 0.0})
+    from fpr_model.rotations import quat_to_rotmat
+    level = np.array([1.0, 0.0, 0.0, 0.0])
+    sample = full.sample(0, level, np.zeros(3), np.array([0.0, 0.0, 9.81]), np.zeros(3), np.zeros(3))
+    up_estimated = quat_to_rotmat(sample.quat_local).T @ np.array([0.0, 0.0, 1.0])
+    measured = sample.specific_force / np.linalg.norm(sample.specific_force)
+    assert up_estimated[:2] == pytest.approx(measured[:2], abs=5e-4)  # first order in |b|/g ≈ 0.01
+    ideal = _imu({"accel_bias": 0.1, "attitude_noise": 0.0}).sample(0, level, np.zeros(3), np.zeros(3),
+                                                                    np.zeros(3), np.zeros(3))
+    assert np.array_equal(ideal.quat_local, level)
+
+
+def test_imu_misalignment_is_a_constant_tilt_of_the_imu_frame_seen_consistently():
+    """sensors.imu_misalignment: a constant per-UAV tilt μ (body x, y) of the IMU frame off the thrust axis; PX4
+    reports the IMU frame's attitude q ∘ exp(μ) and the IMU measures in it, so the reported vertical and the
+    measured specific force agree at rest; seeded, its own stream (the white noise is unchanged)."""
+    from fpr_model.rotations import quat_to_rotmat
+
+    plain = _imu({"attitude_noise": 0.0, "accel_noise": 0.0})
+    sensors = _imu({"imu_misalignment": 0.03, "attitude_noise": 0.0, "accel_noise": 0.0})
+    again = _imu({"imu_misalignment": 0.03, "attitude_noise": 0.0, "accel_noise": 0.0})
+    tilted = np.array([0.9, 0.1, -0.3, 0.3]) / np.linalg.norm([0.9, 0.1, -0.3, 0.3])
+    for i in range(3):
+        mu = sensors.attitude_estimate_error(i)
+        assert mu[2] == 0.0 and 0.0 < np.linalg.norm(mu) < 0.2
+        assert np.array_equal(mu, again.attitude_estimate_error(i))
+        at_rest = quat_to_rotmat(tilted).T @ np.array([0.0, 0.0, 9.81])  # true specific force, thrust-axis frame
+        sample = sensors.sample(i, tilted, np.zeros(3), at_rest, np.zeros(3), np.zeros(3))
+        up_reported = quat_to_rotmat(sample.quat_local).T @ np.array([0.0, 0.0, 1.0])
+        measured = sample.specific_force - sensors.accel_bias[i]
+        assert up_reported == pytest.approx(measured / 9.81, abs=1e-12)
+        reference = plain.sample(i, tilted, np.zeros(3), at_rest, np.zeros(3), np.zeros(3))
+        assert np.linalg.norm(reference.specific_force - sample.specific_force) > 0.05  # it moved by g·|μ|
+    assert plain.attitude_estimate_error(0) is None
+
+
+def _hover_attitudes(share: float, seconds: float = 0.3) -> tuple[list, list, list]:
+    """Hover start (the PX4s hold their hover setpoint, no FPR controller): per UAV the true attitude, the attitude
+    PX4 reports (noise-free) and its tilt δ after ``seconds``."""
+    from fpr_sim.simulation import Simulation, SimulationOptions
+
+    scenario = scenario_from_dict({"initial_state": {"mode": "hover", "armed": True}, "ground": {"enabled": False},
+                                   "cameras": {"enabled": False}, "seed": 4,
+                                   "sensors": {"accel_bias": 0.1, "tilt_from_accel_bias": share,
+                                               "attitude_noise": 0.0}})
+    sim = Simulation(scenario, SimulationOptions(local_base_port=0, remote_base_port=0, lockstep=False))
+    try:
+        sim.advance(seconds)
+        sensors = sim.sensors
+        true = [sim.plant.fleet.quat[i] for i in range(3)]
+        reported = [sensors.to_world_attitude(i, sensors.sample(i, q, np.zeros(3), np.zeros(3), np.zeros(3),
+                                                                np.zeros(3)).quat_local) for i, q in enumerate(true)]
+        tilts = [sensors.attitude_estimate_error(i) for i in range(3)]
+        return true, reported, tilts
+    finally:
+        sim.close()
+
+
+def test_px4_tracks_its_attitude_estimate_so_the_thrust_axis_is_off_by_the_tilt():
+    """With the tilt in PX4's estimate the attitude loops bring the ESTIMATE where the unbiased loops bring the
+    true attitude: what PX4 reports matches the unbiased flight's truth, and the true attitude is off by |δ|
+    (0.3-0.8° here for a 0.1 m/s² bias), as the thrust axis is."""
+    from fpr_model.rotations import quat_error
+
+    def angle(a, b):
+        return 2.0 * float(np.linalg.norm(quat_error(a, b)[1:]))
+
+    true_0, reported_0, tilts_0 = _hover_attitudes(0.0)
+    true_1, reported_1, tilts_1 = _hover_attitudes(1.0)
+    assert tilts_0 == [None, None, None]
+    for i in range(3):
+        tilt = float(np.linalg.norm(tilts_1[i]))
+        assert tilt > 2e-3
+        assert angle(reported_0[i], true_0[i]) < 1e-12  # noise-free and unbiased: the truth
+        assert angle(reported_1[i], true_0[i]) < 0.2 * tilt  # PX4 believes it flies the unbiased attitude
+        assert angle(true_1[i], true_0[i]) == pytest.approx(tilt, rel=0.2)
+
+
 def test_bias_random_walks_grow_with_simulation_time_and_change_nothing_else():
     _, ideal_forces = _samples(_imu())
     ideal_rates, _ = _samples(_imu())
@@ -242,7 +329,8 @@ def test_hardware_profile_switches_the_sensor_effects_on_and_a_scenario_value_wi
 
 
 @pytest.mark.parametrize("overrides", [{"cameras": {"latency": -0.01}}, {"cameras": {"occlusion_probability": 1.5}},
-                                       {"motion_capture": {"rate": 0.0}}, {"sensors": {"accel_bias": -1.0}}])
+                                       {"motion_capture": {"rate": 0.0}}, {"sensors": {"accel_bias": -1.0}},
+                                       {"sensors": {"tilt_from_accel_bias": 1.5}}])
 def test_invalid_sensor_values_are_refused(overrides):
     with pytest.raises(ValueError):
         scenario_from_dict(overrides)
