@@ -178,6 +178,10 @@ class Px4Config:
     extended_sys_state_rate: float = 5.0  #: EXTENDED_SYS_STATE (PX4 onboard: 5 Hz)
 
 
+#: [rad] upper bound of SensorConfig.imu_misalignment (1σ): its attitude error is modelled to first order
+MAX_IMU_MISALIGNMENT = 0.1
+
+
 @dataclass
 class SensorConfig:
     """What each PX4 reports (fpr_sim.sensors): IMU white noise per sample, a per-UAV turn-on bias of the gyro and
@@ -202,7 +206,8 @@ class SensorConfig:
     #: 0: EKF2 estimates the bias away (the former plant); 1: unobserved (no horizontal aiding of EKF2)
     tilt_from_accel_bias: float = 0.0
     #: [rad] 1σ per tilt axis (body x, y) of each UAV's constant misalignment between the IMU frame PX4 controls
-    #: and reports and the rotors' thrust axis (frame, motor mounts, autopilot mounting): δ gets this draw too
+    #: and reports and the rotors' thrust axis (frame, motor mounts, autopilot mounting): δ gets this draw too;
+    #: at most MAX_IMU_MISALIGNMENT
     imu_misalignment: float = 0.0
 
 
@@ -868,6 +873,9 @@ def _validate_sensors(sensors: SensorConfig, cameras: CameraConfig, mocap: Motio
                                 ("motion_capture", mocap, "dropout_probability")):
         if not 0.0 <= getattr(config, name) <= 1.0:
             raise ValueError(f"{group}.{name}: must be within [0, 1], got {getattr(config, name)}")
+    if sensors.imu_misalignment > MAX_IMU_MISALIGNMENT:
+        raise ValueError(f"sensors.imu_misalignment: must be <= {MAX_IMU_MISALIGNMENT} rad (sigma; the attitude error "
+                         f"model is first order in it), got {sensors.imu_misalignment}")
     if cameras.intrinsics_tolerance >= 0.5:
         raise ValueError(f"cameras.intrinsics_tolerance: must be < 0.5, got {cameras.intrinsics_tolerance}")
     if not (mocap.rate > 0.0 and math.isfinite(mocap.rate)):

@@ -113,7 +113,7 @@ class UavSensors:
         noise_rot = quat_from_rotvec(rng.normal(0.0, c.attitude_noise, 3))
         error = self.attitude_estimate_error(i)
         if error is not None:  # PX4 reports its estimate q̂ = q ∘ exp(δ)
-            quat_world = quat_multiply(quat_world, quat_from_rotvec(error))
+            quat_world = _perturb(quat_world, error)
         if self._misalignment_R is not None:  # the IMU measures in its own frame: R(μ)ᵀ (body -> IMU)
             rate = self._misalignment_R[i].T @ rate
             specific_force = self._misalignment_R[i].T @ specific_force

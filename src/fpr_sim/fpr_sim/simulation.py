@@ -218,8 +218,8 @@ class Simulation:
             quat = setpoint.quat
             error = self.sensors.attitude_estimate_error(i)
             if error is not None and not emulator.flies_body_rates:
-                # PX4 tracks its estimate q̂ = q ∘ exp(δ): the true attitude settles at q_d ∘ exp(−δ) (the same
-                # equilibrium; the loop's error vector differs by a rotation of δ, second order)
+                # PX4's attitude law (3.39) acts on its estimate q̂ = q ∘ exp(δ): the true attitude settles at
+                # q_d ∘ exp(−δ) (the same equilibrium; the loop's error vector differs by a rotation of δ, second order)
                 quat = quat_multiply(quat, quat_from_rotvec(-error))
             quats.append(quat)
             thrusts.append(setpoint.thrust)

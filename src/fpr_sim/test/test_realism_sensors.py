@@ -113,6 +113,14 @@ def test_imu_misalignment_is_a_constant_tilt_of_the_imu_frame_seen_consistently(
     assert plain.attitude_estimate_error(0) is None
 
 
+@pytest.mark.parametrize("value", [0.2, float("inf"), float("nan"), -0.01])
+def test_imu_misalignment_outside_the_first_order_range_is_refused(value):
+    """The attitude error is modelled to first order in μ: a σ above 0.1 rad, or not finite, is refused in one line."""
+    with pytest.raises(ValueError, match="sensors.imu_misalignment: "):
+        scenario_from_dict({**HOVER, "sensors": {"imu_misalignment": value}})
+    scenario_from_dict({**HOVER, "sensors": {"imu_misalignment": 0.1}})
+
+
 def _hover_attitudes(share: float, seconds: float = 0.3) -> tuple[list, list, list]:
     """Hover start (the PX4s hold their hover setpoint, no FPR controller): per UAV the true attitude, the attitude
     PX4 reports (noise-free) and its tilt δ after ``seconds``."""
