@@ -109,11 +109,11 @@ DEFAULT_GAINS: dict = {
     "pid_centralized": {"position_xy": [9.0, 6.0, 25.0], "position_z": [16.0, 8.0, 50.0],
                         "orientation_xy": [9.0, 6.0, 1.0], "orientation_z": [9.0, 6.0, 0.5],
                         "legs": [9.0, 6.0, 10.0], "integral_limit": [2.0, 2.0, 2.0],
-                        "integral_zone": [0.1, 0.02, 0.02]},
+                        "integral_zone": [math.inf, math.inf, math.inf]},
     "pid_decentralized": {"position_xy": [0.0, 9.0, 0.0], "position_z": [0.0, 8.0, 0.0],
                           "orientation_xy": [9.0, 6.0, 1.0], "orientation_z": [0.0, 6.0, 0.0],
                           "legs": [9.0, 6.0, 0.5], "integral_limit": [2.0, 2.0, 2.0],
-                          "integral_zone": [0.1, 0.02, 0.02]},
+                          "integral_zone": [math.inf, math.inf, math.inf]},
     # Table 3.1 observer gains (position, orientation, legs); smwo_epsilon: sgn* linear zone (3.21)
     "observer": {"fowo": [2.0, 1.0, 1.0], "sowo_k1": [4.0, 2.0, 2.0], "sowo_k2": [1.0, 0.5, 0.5],
                  "smwo_ks": [4.0, 1.0, 1.0], "smwo_kt": [3.2, 1.6, 1.6], "smwo_epsilon": 0.02},
