@@ -245,6 +245,9 @@ class ControllerNode(Node):
                 self._gains_values, gains = candidate(v)
                 self.controller.reconfigure(gains=gains)
 
+            if name == "integral_zone":  # .inf: no zone, the thesis's saturation-only rule (README "PID anti-windup")
+                return dyn(leaf, default, f"{group} {name} [m, rad, rad]: integrate an error only while |error| <= "
+                           "this; .inf: always", apply, check, high=math.inf)
             return dyn(leaf, default, f"{group} gain {name}", apply, check)
 
         for group, values in DEFAULT_GAINS.items():

@@ -103,8 +103,11 @@ def test_damping_ratios_of_the_tables():
     assert isinstance(gains_from_dict({}, 4).impedance_decentralized, ImpedanceGains)
 
 
-def test_pid_anti_windup():
-    gains = gains_from_dict({}, 3).pid_centralized
+@pytest.mark.parametrize("zone", [None, [0.1, 0.02, 0.02]])
+def test_pid_anti_windup(zone):
+    """Saturation |K_i ∫ε| <= integral_limit always (the thesis's rule, the default); with an integral zone, an error
+    outside it is not integrated at all."""
+    gains = gains_from_dict({} if zone is None else {"pid_centralized": {"integral_zone": zone}}, 3).pid_centralized
     law = PidMotionLaw(gains)
     error = np.full(9, 0.01)
     for _ in range(10000):
@@ -113,9 +116,12 @@ def test_pid_anti_windup():
     assert np.all(np.abs(integral_term) <= gains.integral_limit + 1e-12)
     assert integral_term[2] == pytest.approx(2.0)  # the bound is reached
     law.reset()
-    big = np.full(9, 0.5)  # outside the integration zone: not integrated
+    big = np.full(9, 0.5)
     law.acceleration(big, np.zeros(9), np.zeros(9), np.zeros(9), 0.02)
-    assert np.all(law.integral == 0.0)
+    if zone is None:  # integrated: the default has no zone
+        assert np.all(law.integral == pytest.approx(0.5 * 0.02))
+    else:  # outside the integration zone: not integrated
+        assert np.all(law.integral == 0.0)
 
 
 @pytest.mark.parametrize("tilt", [0.0, 0.2, 0.5])

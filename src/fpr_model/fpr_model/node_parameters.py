@@ -88,6 +88,8 @@ class Param:
 
 
 def _show(value: float) -> str:
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
     if value >= FLOAT_MAX:
         return "max"
     if value <= -FLOAT_MAX:
