@@ -66,6 +66,9 @@ class UavSensors:
         #: per UAV: R(μ_i), IMU frame -> thrust-axis body frame (None: no misalignment)
         self._misalignment_R = ([quat_to_rotmat(quat_from_rotvec(m)) for m in self.imu_misalignment]
                                 if self.config.imu_misalignment > 0.0 else None)
+        #: per UAV: (exp(δ_i), exp(−δ_i)) of the present attitude-estimate error, or None until computed (a cache: δ_i
+        #: changes only with the accelerometer bias; PX4's 250 Hz loop and every sample use it)
+        self._estimate_quats: list[tuple[np.ndarray, np.ndarray] | None] = [None] * n
         #: [m/s²] what the accelerometer reads at rest (the plant's gravity)
         self.gravity = float(default_parameters(n).gravity if gravity is None else gravity)
         self.yaw_offsets = np.array([float(per_uav(scenario.px4.yaw_offsets, i)) for i in range(n)])
@@ -88,6 +91,7 @@ class UavSensors:
         xi = self.bias_rngs[i].standard_normal(6)
         self.gyro_bias[i] += c.gyro_bias_random_walk * np.sqrt(dt) * xi[:3]
         self.accel_bias[i] += c.accel_bias_random_walk * np.sqrt(dt) * xi[3:]
+        self._estimate_quats[i] = None  # δ_i follows the accelerometer bias
 
     def attitude_estimate_error(self, i: int) -> np.ndarray | None:
         """δ_i [rad] (rotation vector in the thrust-axis body frame FLU of the plant) of the attitude UAV i's PX4
@@ -102,6 +106,17 @@ class UavSensors:
         share = c.tilt_from_accel_bias
         return self.imu_misalignment[i] + np.array([share * by / self.gravity, -share * bx / self.gravity, 0.0])
 
+    def attitude_estimate_quats(self, i: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(exp(δ_i), exp(−δ_i)) as unit quaternions [w, x, y, z] of :meth:`attitude_estimate_error` (None when it is
+        off), computed once per value of δ_i."""
+        cached = self._estimate_quats[i]
+        if cached is None:
+            error = self.attitude_estimate_error(i)
+            if error is None:
+                return None
+            cached = self._estimate_quats[i] = (quat_from_rotvec(error), quat_from_rotvec(-error))
+        return cached
+
     def sample(self, i: int, quat_world: np.ndarray, rate: np.ndarray, specific_force: np.ndarray,
                position_world: np.ndarray, velocity_world: np.ndarray, t: float | None = None) -> ImuSample:
         """Noisy measurement of UAV i (0-based) from its true state (world ENU, body FLU) at ``t`` [s] (simulation
@@ -111,9 +126,10 @@ class UavSensors:
             self.advance_biases(i, float(t))
         rng = self.rngs[i]
         noise_rot = quat_from_rotvec(rng.normal(0.0, c.attitude_noise, 3))
-        error = self.attitude_estimate_error(i)
-        if error is not None:  # PX4 reports its estimate q̂ = q ∘ exp(δ)
-            quat_world = _perturb(quat_world, error)
+        estimate = self.attitude_estimate_quats(i)
+        if estimate is not None:  # PX4 reports its estimate q̂ = q ∘ exp(δ)
+            quat_world = quat_multiply(quat_world, estimate[0])
+            quat_world = quat_world / np.linalg.norm(quat_world)
         if self._misalignment_R is not None:  # the IMU measures in its own frame: R(μ)ᵀ (body -> IMU)
             rate = self._misalignment_R[i].T @ rate
             specific_force = self._misalignment_R[i].T @ specific_force

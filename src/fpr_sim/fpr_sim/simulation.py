@@ -60,7 +60,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from fpr_model.rotations import quat_from_rotvec, quat_multiply
+from fpr_model.rotations import quat_multiply
 
 from fpr_sim.plant import GroundTruth, Plant
 from fpr_sim.px4_emulator import LOCAL_BASE_PORT, REMOTE_BASE_PORT, Px4Emulator, boot_time_ms
@@ -216,11 +216,11 @@ class Simulation:
             else:
                 setpoint = emulator.update(t, bool(landed[i]), self.plant.fleet.quat[i])
             quat = setpoint.quat
-            error = self.sensors.attitude_estimate_error(i)
-            if error is not None and not emulator.flies_body_rates:
+            estimate = self.sensors.attitude_estimate_quats(i)
+            if estimate is not None and not emulator.flies_body_rates:
                 # PX4's attitude law (3.39) acts on its estimate q̂ = q ∘ exp(δ): the true attitude settles at
                 # q_d ∘ exp(−δ) (the same equilibrium; the loop's error vector differs by a rotation of δ, second order)
-                quat = quat_multiply(quat, quat_from_rotvec(-error))
+                quat = quat_multiply(quat, estimate[1])
             quats.append(quat)
             thrusts.append(setpoint.thrust)
             armed.append(setpoint.armed)

@@ -89,6 +89,23 @@ def test_tilt_from_accel_bias_is_the_accelerometer_s_view_of_the_vertical():
     assert np.array_equal(ideal.quat_local, level)
 
 
+def test_attitude_estimate_quats_follow_the_bias_random_walk():
+    """The cached (exp(δ), exp(−δ)) equal a fresh computation of δ, also after the accelerometer bias walked."""
+    sensors = _imu({"accel_bias": 0.1, "tilt_from_accel_bias": 1.0, "accel_bias_random_walk": 0.05,
+                    "imu_misalignment": 0.02})
+    assert _imu({"accel_bias": 0.1}).attitude_estimate_quats(0) is None
+    for t in (0.0, 0.5, 2.0):
+        sensors.advance_biases(1, t)
+        forward, backward = sensors.attitude_estimate_quats(1)
+        error = sensors.attitude_estimate_error(1)
+        assert np.array_equal(forward, quat_from_rotvec(error)) and np.array_equal(backward, quat_from_rotvec(-error))
+        assert np.allclose(quat_multiply(forward, backward), [1.0, 0.0, 0.0, 0.0], atol=1e-15)
+    first = sensors.attitude_estimate_quats(0)[0].copy()  # cached now
+    sensors.advance_biases(0, 0.0)
+    sensors.advance_biases(0, 1.0)  # the walk moved δ_0: the cache follows
+    assert not np.array_equal(sensors.attitude_estimate_quats(0)[0], first)
+
+
 def test_imu_misalignment_is_a_constant_tilt_of_the_imu_frame_seen_consistently():
     """sensors.imu_misalignment: a constant per-UAV tilt μ (body x, y) of the IMU frame off the thrust axis; PX4
     reports the IMU frame's attitude q ∘ exp(μ) and the IMU measures in it, so the reported vertical and the
