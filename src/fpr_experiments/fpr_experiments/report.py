@@ -204,8 +204,11 @@ def _realism_text(realism: dict | None) -> str:
     sensors, cameras = realism.get("sensors") or {}, realism.get("cameras") or {}
     enabled = [name for name, section in (realism.get("sections") or {}).items()
                if isinstance(section, dict) and section.get("enabled")]
-    return (f" Realism: {realism.get('profile')} (effects on: {', '.join(enabled) or 'none'}); IMU gyro noise "
-            f"{sensors.get('gyro_noise', realism.get('imu_gyro_noise_rad_s'))} rad/s, accel "
+    share, misalignment = sensors.get("tilt_from_accel_bias") or 0.0, sensors.get("imu_misalignment") or 0.0
+    estimate = (f"; PX4's attitude estimate: accelerometer-bias tilt share {share:g}, IMU misalignment "
+                f"{misalignment:g} rad (1σ per axis)" if share > 0.0 or misalignment > 0.0 else "")
+    return (f" Realism: {realism.get('profile')} (effects on: {', '.join(enabled) or 'none'}){estimate}; "
+            f"IMU gyro noise {sensors.get('gyro_noise', realism.get('imu_gyro_noise_rad_s'))} rad/s, accel "
             f"{sensors.get('accel_noise', realism.get('imu_accel_noise_m_s2'))} m/s²; emulated marker pose noise "
             f"{cameras.get('position_noise', realism.get('camera_position_noise_m'))} m / "
             f"{cameras.get('angle_noise', realism.get('camera_angle_noise_rad')) or 0.0:.3f} rad; image pixel noise "

@@ -74,6 +74,9 @@ def test_realism_summary_states_the_profile_and_every_realism_section():
     assert ideal["profile"] == "ideal" and not any(s["enabled"] for s in ideal["sections"].values())
     assert "hardware (effects on: " in _realism_text(summary) and "link)" in _realism_text(summary)
     assert "ideal (effects on: none)" in _realism_text(ideal)
+    # PX4's attitude estimate is named when it is on (hardware since calibration pass 8), not in the ideal profile
+    assert "PX4's attitude estimate: accelerometer-bias tilt share 1," in _realism_text(summary)
+    assert "attitude estimate" not in _realism_text(ideal)
     # the mismatch's draws are named as plant parameters off the model (they were reported as "none" before)
     assert "drawn off Table B.1 by the model mismatch (" in _realism_text(summary)
     assert "drawn off" not in _realism_text(ideal) and "set by the scenario: none." in _realism_text(ideal)
