@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 from fpr_model.parameters import default_parameters
-from fpr_model.rotations import quat_from_rotvec, quat_multiply, quat_to_rotmat
+from fpr_model.rotations import quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotmat
 
 from fpr_sim.plant import GroundTruth
 from fpr_sim.scenario import MotionCaptureConfig, Scenario, SensorConfig, per_uav
@@ -91,7 +91,8 @@ class UavSensors:
         xi = self.bias_rngs[i].standard_normal(6)
         self.gyro_bias[i] += c.gyro_bias_random_walk * np.sqrt(dt) * xi[:3]
         self.accel_bias[i] += c.accel_bias_random_walk * np.sqrt(dt) * xi[3:]
-        self._estimate_quats[i] = None  # δ_i follows the accelerometer bias
+        if c.tilt_from_accel_bias > 0.0:
+            self._estimate_quats[i] = None  # δ_i follows the accelerometer bias
 
     def attitude_estimate_error(self, i: int) -> np.ndarray | None:
         """δ_i [rad] (rotation vector in the thrust-axis body frame FLU of the plant) of the attitude UAV i's PX4
@@ -114,7 +115,8 @@ class UavSensors:
             error = self.attitude_estimate_error(i)
             if error is None:
                 return None
-            cached = self._estimate_quats[i] = (quat_from_rotvec(error), quat_from_rotvec(-error))
+            forward = quat_from_rotvec(error)
+            cached = self._estimate_quats[i] = (forward, quat_conjugate(forward))  # exp(−δ) = conj(exp(δ)), exactly
         return cached
 
     def sample(self, i: int, quat_world: np.ndarray, rate: np.ndarray, specific_force: np.ndarray,
