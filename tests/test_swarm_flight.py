@@ -197,6 +197,24 @@ def test_controllers_run_mode_c_without_fallback(flight):
         assert invalid == 0
 
 
+def test_controllers_report_the_platform_tilt_the_swarm_guard_watches(flight):
+    """ControllerStatus.platform_tilt (the bridges' platform envelope, max_platform_tilt_deg) is each UAV's
+    estimate of the true tilt: within 1.5° RMS of the ground truth's while flying (up to ~3° in the roll step's
+    transient: the estimate lags the truth by the camera's latency), far below the envelope."""
+    start = _offboard_time(flight) + 0.5
+    truth = flight["truth"]
+    true_tilt = np.degrees(np.arccos(np.clip(np.cos(truth["rpy"][:, 0]) * np.cos(truth["rpy"][:, 1]), -1.0, 1.0)))
+    for i, diagnostics in flight["diagnostics"].items():
+        flying = [d for d in diagnostics if start <= _stamp(d) <= LAND]
+        reported = np.degrees([d.platform_tilt for d in flying])
+        expected = np.interp([_stamp(d) for d in flying], truth["t"], true_tilt)
+        worst = float(np.max(np.abs(reported - expected)))
+        rms = float(np.sqrt(np.mean((reported - expected) ** 2)))
+        print(f"[swarm] uav {i}: platform tilt reported up to {reported.max():.1f}°, true up to {expected.max():.1f}°, "
+              f"difference RMS {rms:.2f}°, worst {worst:.2f}°")
+        assert np.isfinite(reported).all() and rms < 1.5 and worst < 6.0 and reported.max() < 20.0
+
+
 def test_lockstep_timeouts_stay_small(flight):
     assert flight["timeouts_before_land"] <= MAX_LOCKSTEP_TIMEOUTS
 

@@ -34,7 +34,7 @@ from fpr_model.dynamics import model_terms
 from fpr_model.geometry import desired_uav_rotation, leg_anchor_angles
 from fpr_model.kinematics import jacobian_at
 from fpr_model.parameters import FprParameters
-from fpr_model.rotations import quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
+from fpr_model.rotations import quat_tilt, quat_to_euler_zyx, quat_to_rotmat, rotmat_to_euler_zyx
 
 from fpr_control.contact_guard import ContactGuard, ContactGuardConfig
 from fpr_control.information import (
@@ -234,6 +234,9 @@ class ControlOutput:
     applied_contact_force: float = 0.0
     contact_guard_state: int = 0  #: fpr_control.contact_guard IDLE / PUSHING / LOST
     contact_guard_event: str | None = None  #: one line when the guard declares the contact lost or re-arms
+    #: [rad] the platform's tilt from the vertical in the state this step used (NaN: none yet); the bridges' swarm
+    #: guard's flight envelope (ControllerStatus.platform_tilt)
+    platform_tilt: float = math.nan
 
 
 class Controller:
@@ -330,10 +333,25 @@ class Controller:
             warning = f"control step failed ({error}): holding the last setpoint"
         if out.warning is None:
             out.warning = warning
+        out.platform_tilt = self._platform_tilt(local, ground_truth)
         out.loop_time = time.perf_counter() - start
         if out.state_ok:
             self._last_output = out
         return out
+
+    def _platform_tilt(self, local: LocalEstimate | None, ground_truth: GroundTruth | None) -> float:
+        """[rad] angle between the platform's z axis z_p and the vertical in the state of this step: the motion
+        capture's platform_quat (F0) in the ground-truth modes, else the last valid LocalState's roll and pitch (the
+        flat-platform frame F_Fp of §4.3.1 shares F0's vertical); NaN without one. Reported, not used by the law: the
+        bridges' swarm guard lands the swarm when it stays above its envelope (fpr_px4_bridge.swarm_guard)."""
+        if self.uses_ground_truth:
+            if ground_truth is None or not ground_truth.is_finite():
+                return math.nan
+            quat = ground_truth.platform_quat
+            return float(quat_tilt(quat / np.linalg.norm(quat)))
+        if local is None:
+            return math.nan
+        return float(quat_tilt(flat_platform_quat(local.platform_roll, local.platform_pitch)))
 
     # ------------------------------------------------------------------------------------------------
     def _command(self, command: TeleopReference | None, roll: float, pitch: float,

@@ -532,6 +532,7 @@ class ControllerNode(Node):
         st.thrust_saturated, st.tilt_saturated = bool(out.thrust_saturated), bool(out.tilt_saturated)
         st.local_state_valid = self._state_valid  # ground-truth modes: the motion capture is fresh
         st.loop_time = float(out.loop_time)
+        st.platform_tilt = float(out.platform_tilt)  # the bridge's swarm guard: flight envelope
         desired = out.desired
         if desired is None:  # no successful control step yet
             nan = math.nan

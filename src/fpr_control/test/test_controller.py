@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 from closed_loop import HARNESS_PLAUSIBILITY, Sim, command, hover_state
-from fpr_control.controller import Controller, ControllerConfig, gains_from_dict
+from fpr_control.controller import Controller, ControllerConfig, GroundTruth, gains_from_dict
 from fpr_control.information import LocalEstimate, PeerInfo
 from fpr_model.parameters import default_parameters
-from fpr_model.rotations import quat_to_euler_zyx, rot_z
+from fpr_model.rotations import euler_zyx_to_quat, quat_to_euler_zyx, rot_z
 
 PARAMS = default_parameters(3)
 YAW_OFFSETS = np.array([0.0, 1.0, -2.0])  # unknown yaw of each F0i: exercises (4.38)
@@ -240,6 +240,27 @@ def test_decentralized_desired_state_is_the_teleop_configuration(mode):
         assert d.position == pytest.approx(np.zeros(3), abs=0.0) and d.yaw == pytest.approx(0.0, abs=1e-12)
         assert (d.roll, d.pitch, d.contact_force) == pytest.approx((0.05, -0.04, 2.5), abs=1e-12)
         assert d.leg_angles == pytest.approx([0.7, 0.72, 0.74], abs=1e-12)
+
+
+def test_platform_tilt_is_reported_from_the_state_the_step_used():
+    """ControlOutput.platform_tilt (the bridges' platform envelope): acos(cos φ cos ϑ) of the LocalState, the last
+    valid one while the current is not finite, the motion capture's in the ground-truth modes, NaN without a state."""
+    controller = _controllers("communicating")[0]
+    assert math.isnan(controller.step(0.0, None, None).platform_tilt)
+    roll, pitch = math.radians(30.0), math.radians(-40.0)
+    expected = math.acos(math.cos(roll) * math.cos(pitch))
+    out = controller.step(0.02, _local(platform_roll=roll, platform_pitch=pitch), command(3))
+    assert out.platform_tilt == pytest.approx(expected, abs=1e-12)
+    out = controller.step(0.04, _local(platform_roll=float("nan")), command(3))  # not finite: the last valid one
+    assert out.platform_tilt == pytest.approx(expected, abs=1e-12)
+    centralized = _controllers("centralized")[0]
+    assert math.isnan(centralized.step(0.0, _local(), command(3)).platform_tilt)  # no motion capture yet
+    q, _ = hover_state(PARAMS)
+    tilted = euler_zyx_to_quat(0.0, math.radians(50.0), 1.0)
+    truth = GroundTruth(q[:3], 2.0 * tilted, np.zeros(3), np.zeros(3), q[7:], np.zeros(3),
+                        np.tile([1.0, 0.0, 0.0, 0.0], (3, 1)))  # not unit: normalised
+    out = centralized.step(0.02, None, command(3), truth)
+    assert out.platform_tilt == pytest.approx(math.radians(50.0), abs=1e-9)
 
 
 def test_desired_state_before_the_first_step_and_during_a_hold():

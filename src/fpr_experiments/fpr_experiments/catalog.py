@@ -65,6 +65,7 @@ DEFAULT_CHECKS: dict[str, dict[str, float]] = {
     "max_excursion_m": {"max": 3.0},
     "nonfinite_samples": {"max": 0.0},
     "ground_contacts": {"max": 0.0},
+    "swarm_emergencies": {"max": 0.0},  # the bridges' swarm guard landed or held the robot (metrics.json: why)
 }
 
 

@@ -26,7 +26,9 @@ Definitions (the thesis's symbols, ASCII names):
   that were emulated from the motion capture (§4.4.2);
 - safety figures: ``max_abs_roll_deg`` / ``max_abs_pitch_deg`` (whole airborne flight), ``max_height_m``,
   ``max_excursion_m`` (horizontal, from the start), ``ground_contacts`` (UAVs touching the ground while the
-  controllers fly, unless the operator just commanded a descent: that is landing), ``nonfinite_samples``.
+  controllers fly, unless the operator just commanded a descent: that is landing), ``nonfinite_samples``,
+  ``swarm_emergencies`` (entries of the swarm into the bridges' emergency response: Hold, then land; why in
+  metrics.json ``emergencies``).
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ METRIC_INFO: dict[str, MetricInfo] = {
     "max_excursion_m": MetricInfo("m", "largest horizontal distance from the start", 2),
     "ground_contacts": MetricInfo("", "UAV ground touches while the controllers fly (no LAND)", 0),
     "nonfinite_samples": MetricInfo("", "ground-truth samples with NaN/inf", 0),
+    "swarm_emergencies": MetricInfo("", "entries of the swarm into its emergency response (any UAV's bridge)", 0),
     "tracking_time_s": MetricInfo("s", "time inside the tracking window", 1),
     "fallback_fraction": MetricInfo("", "fraction of control periods in the NC fallback (all UAVs)", 3),
     "recovery_time_s": MetricInfo("s", "after the link is back: until no controller is in fallback", 2),
@@ -436,7 +439,22 @@ def safety_metrics(record: FlightRecord) -> dict[str, float]:
             descending = (k >= 0) & (truth.t - down[np.clip(k, 0, None)] <= GROUND_DESCENT_GRACE)
     events = np.diff(np.concatenate([[0], (touching & flying & was_airborne & ~descending).astype(int)])) == 1
     out["ground_contacts"] = float(np.count_nonzero(events))
+    out["swarm_emergencies"] = float(swarm_emergencies(record))
     return out
+
+
+def swarm_emergencies(record: FlightRecord) -> int:
+    """How many times the swarm entered its emergency response: rising edges of "some UAV's bridge is in
+    EMERGENCY" over the union of the status instants (every UAV following one root cause counts once)."""
+    emergency = record.names.emergency_state
+    times = np.unique(np.concatenate([u.status_t for u in record.uavs] + [np.zeros(0)]))
+    if len(times) == 0:
+        return 0
+    some = np.zeros(len(times), dtype=bool)
+    for u in record.uavs:
+        if len(u.status_t):
+            some |= hold(times, u.status_t, u.bridge_state) == emergency
+    return int(np.count_nonzero(np.diff(np.concatenate([[0], some.astype(int)])) == 1))
 
 
 @dataclass

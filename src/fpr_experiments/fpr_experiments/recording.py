@@ -275,7 +275,7 @@ def state_names() -> StateNames:
                       bridge_state=constant_names(UavStatus, "STATE_"),
                       controller_mode=constant_names(ControllerStatus, "MODE_"),
                       fly_mode=TeleopCommand.MODE_FLY, land_mode=TeleopCommand.MODE_LAND,
-                      offboard_state=UavStatus.STATE_OFFBOARD)
+                      offboard_state=UavStatus.STATE_OFFBOARD, emergency_state=UavStatus.STATE_EMERGENCY)
 
 
 def _t(msg) -> float:
@@ -380,4 +380,18 @@ def flight_record(recording: Recording, n: int, **run_info) -> FlightRecord:
 
         events = [json.loads(m.data) for m in recording.get(PILOT_EVENTS)]
     return FlightRecord(n=n, truth=truth, command=command, uavs=uavs, names=state_names(), events=events,
-                        **run_info)
+                        emergencies=emergency_entries(recording, n), **run_info)
+
+
+def emergency_entries(recording: Recording, n: int) -> list[dict]:
+    """Every entry of a UAV's bridge into the swarm's emergency response (UavStatus.STATE_EMERGENCY), with the
+    reason its status gave, in time order (:attr:`FlightRecord.emergencies`)."""
+    entries = []
+    for i in range(1, n + 1):
+        previous = None
+        for msg in sorted(recording.get(f"/fpr/uav{i}/status"), key=_t):
+            if msg.state == UavStatus.STATE_EMERGENCY and previous != UavStatus.STATE_EMERGENCY:
+                entries.append({"t": _t(msg), "uav": i, "own": bool(msg.emergency_own),
+                                "reason": str(msg.emergency_reason)})
+            previous = msg.state
+    return sorted(entries, key=lambda e: (e["t"], e["uav"]))

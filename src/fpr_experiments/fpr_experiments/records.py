@@ -95,6 +95,7 @@ class StateNames:
     fly_mode: int = 2          #: TeleopCommand.MODE_FLY
     land_mode: int = 3         #: TeleopCommand.MODE_LAND
     offboard_state: int = 4    #: UavStatus.STATE_OFFBOARD
+    emergency_state: int = 8   #: UavStatus.STATE_EMERGENCY
 
 
 @dataclass
@@ -107,6 +108,9 @@ class FlightRecord:
     uavs: list[UavSeries]
     names: StateNames
     events: list[dict] = field(default_factory=list)  #: scripted-operator task events (fpr_experiments.pilot)
+    #: each UAV's entries into the swarm's emergency response (UavStatus.STATE_EMERGENCY): {"t" [s], "uav",
+    #: "own" (a cause of its own, else it follows a peer), "reason"} in time order (fpr_px4_bridge.swarm_guard)
+    emergencies: list[dict] = field(default_factory=list)
     experiment: str = ""
     variant: str = ""
     scenario: str = ""

@@ -99,7 +99,7 @@ def write_variant_json(result, record, path: str, scenario) -> None:
         "callback_errors": result.callback_errors, "checks": [
             {"metric": c.metric, "value": c.value, **c.bounds, "passed": c.passed} for c in result.checks],
         "passed": result.passed, "metrics": metrics, "realism": realism_summary(scenario),
-        "events": record.events}, path)
+        "events": record.events, "emergencies": record.emergencies}, path)
 
 
 def write_variant_plots(record, experiment: Experiment, output_dir: str, dpi: int = 110) -> list[str]:

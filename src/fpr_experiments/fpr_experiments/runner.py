@@ -274,6 +274,8 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
              + ("ok" if not failed else "FAILED: " + "; ".join(failed)))
         for error in errors[:3]:
             _say(f"[{label}] callback error: {error}")
+        for entry in [e for e in record.emergencies if e["own"]][:3]:  # the root causes; the peers follow them
+            _say(f"[{label}] swarm emergency at {entry['t']:.2f} s: uav{entry['uav']}: {entry['reason']}")
     return result
 
 

@@ -85,6 +85,23 @@ def test_a_touch_down_while_the_controllers_fly_is_a_ground_contact():
     assert fm.safety_metrics(record)["nonfinite_samples"] == 1.0
 
 
+def test_swarm_emergencies_count_the_swarm_entering_its_emergency_response():
+    record = synthetic_record()
+    assert fm.safety_metrics(record)["swarm_emergencies"] == 0.0
+    t = record.uavs[0].status_t
+    emergency = record.names.emergency_state
+    # UAV 2 enters at 12 s (its own cause), the peers follow within a status period; all rejoin at 14 s
+    for uav, start in ((2, 12.0), (1, 12.1), (3, 12.2)):
+        state = record.uavs[uav - 1].bridge_state.copy()
+        state[(t >= start - 1e-9) & (t < 14.0)] = emergency
+        record.uavs[uav - 1].bridge_state = state
+    assert fm.safety_metrics(record)["swarm_emergencies"] == 1.0  # one root cause, followed: once
+    state = record.uavs[0].bridge_state.copy()
+    state[(t >= 16.0) & (t < 16.5)] = emergency  # again, UAV 1 alone
+    record.uavs[0].bridge_state = state
+    assert fm.safety_metrics(record)["swarm_emergencies"] == 2.0
+
+
 def test_relative_pose_errors_and_detection_rate():
     record = synthetic_record()
     positions, quats = fm.true_relative_poses(record)

@@ -77,6 +77,27 @@ def test_flight_record_from_messages():
     assert math.isclose(record.uavs[0].desired_rpy[0, 0], 0.1)
 
 
+def test_emergency_entries_name_each_uav_entering_the_emergency_and_why():
+    recording = _recording()
+
+    def status(t: float, state: int, own: bool = False, reason: str = "") -> UavStatus:
+        msg = _stamp(UavStatus(), t)
+        msg.state, msg.emergency_own, msg.emergency_reason = state, own, reason
+        return msg
+
+    offboard, emergency = UavStatus.STATE_OFFBOARD, UavStatus.STATE_EMERGENCY
+    why = "platform tilt above max_platform_tilt 45° for 0.3 s (the structure is out of control)"
+    recording.messages["/fpr/uav2/status"] = [status(2.0, emergency, True, why), status(1.0, offboard),
+                                              status(2.1, emergency, True, why), status(3.0, offboard),
+                                              status(4.0, emergency, True, "again")]
+    recording.messages["/fpr/uav1/status"] = [status(1.0, offboard), status(2.05, emergency, False, "uav2 ...")]
+    record = flight_record(recording, N)
+    entries = [(round(e["t"], 6), e["uav"], e["own"], e["reason"]) for e in record.emergencies]
+    assert entries == [(2.0, 2, True, why), (2.05, 1, False, "uav2 ..."),
+                       (4.0, 2, True, "again")]  # a status repeated in EMERGENCY is no new entry
+    assert flight_record(_recording(), N).emergencies == []
+
+
 def test_mcap_round_trip(tmp_path):
     from mcap.reader import make_reader
     from rclpy.serialization import deserialize_message

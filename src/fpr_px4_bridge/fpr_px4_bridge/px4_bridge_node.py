@@ -113,6 +113,9 @@ _PARAMETERS = {
     "max_climb_rate": Param(2.0, "[m/s] flight envelope: climb rate, for envelope_time", low=0.1, high=100.0),
     "max_tilt_deg": Param(60.0, "[deg] flight envelope: UAV tilt, for envelope_time (PX4 FD_FAIL_R / FD_FAIL_P)",
                           low=1.0, high=179.0),
+    "max_platform_tilt_deg": Param(45.0, "[deg] flight envelope: the platform's tilt in the own controller's state "
+                                   "(ControllerStatus.platform_tilt), for envelope_time (1.5x the controller's "
+                                   "command_max_tilt_deg 30)", low=1.0, high=179.0),
     "envelope_time": Param(0.3, "[s] an envelope excess must last this long (PX4 FD_FAIL_R_TTRI)", low=0.01,
                            high=60.0),
     "wall_silence_timeout": (0.5, "[s] of WALL time without any MAVLink frame, on simulation time only: PX4 (the "
@@ -181,7 +184,7 @@ class Px4BridgeNode(Node):
                 peer_status_deadline=float(p["peer_status_deadline"]),
                 peer_silence_deadline=float(p["peer_silence_deadline"]), max_height=float(p["max_height"]),
                 max_climb_rate=float(p["max_climb_rate"]), max_tilt_deg=float(p["max_tilt_deg"]),
-                envelope_time=float(p["envelope_time"])))
+                max_platform_tilt_deg=float(p["max_platform_tilt_deg"]), envelope_time=float(p["envelope_time"])))
         url = p["connection_url"] or f"udp://127.0.0.1:{14540 + uav_id - 1}"
         key = load_signing_key(p["signing_key_file"]) if p["signing_key_file"] else None
         self.link = MavlinkLink(url, system_id=int(p["system_id"]) or target_system,
@@ -276,7 +279,8 @@ class Px4BridgeNode(Node):
     def _on_controller_status(self, msg: ControllerStatus) -> None:
         if msg.uav_id == self.config.uav_id:
             with self._lock:
-                self.bridge.guard.on_own_controller_status(bool(msg.local_state_valid), self._now())
+                self.bridge.guard.on_own_controller_status(bool(msg.local_state_valid), self._now(),
+                                                           float(msg.platform_tilt))
 
     def _on_peer_status(self, msg: UavStatus) -> None:
         with self._lock:

@@ -13,7 +13,13 @@ OWN (this UAV is the one in trouble; said in its UavStatus so that the peers fol
 - ``envelope`` (latched until landed: no rejoin): the UAV's height above its take-off point (PX4's local
   position) above ``max_height``; its climb rate above ``max_climb_rate`` for ``envelope_time``; its tilt above
   ``max_tilt`` for ``envelope_time`` (PX4's attitude-failure detector FD_FAIL_R / FD_FAIL_P 60° with
-  FD_FAIL_R_TTRI / FD_FAIL_P_TTRI 0.3 s, here as a trigger of the swarm's descent, not a flight termination).
+  FD_FAIL_R_TTRI / FD_FAIL_P_TTRI 0.3 s, here as a trigger of the swarm's descent, not a flight termination);
+  the **platform's** tilt, as the own controller's state has it (``ControllerStatus.platform_tilt``), above
+  ``max_platform_tilt_deg`` for ``envelope_time``: the structure is out of control although every UAV may still be
+  upright (an unstable law or observer: in the hardware profile an impedance + SOWO flight rolled the platform to
+  50-80° and climbed 2.4 m for 8 s before a UAV's own tilt reached 60°). The default 45° is 1.5× the largest
+  platform tilt an operator may command (the controller's ``command_max_tilt_deg`` 30°). A NaN tilt (no state)
+  neither starts nor ends the count: a lost estimate is the ``estimate`` cause.
 
 PEER (another UAV is lost; this one follows):
 - a peer's UavStatus says it is in an emergency of its OWN (a peer's emergency that is itself only a PEER one is
@@ -79,6 +85,8 @@ class SwarmGuardConfig:
     max_height: float = 10.0             #: [m] above the take-off point (PX4 local position) -> ENVELOPE
     max_climb_rate: float = 2.0          #: [m/s] upwards, for envelope_time -> ENVELOPE
     max_tilt_deg: float = 60.0           #: [°] UAV tilt for envelope_time (PX4 FD_FAIL_R / FD_FAIL_P) -> ENVELOPE
+    #: [°] platform tilt (own controller's state) for envelope_time -> ENVELOPE (1.5× command_max_tilt_deg 30°)
+    max_platform_tilt_deg: float = 45.0
     envelope_time: float = 0.3           #: [s] (PX4 FD_FAIL_R_TTRI / FD_FAIL_P_TTRI)
 
     def __post_init__(self) -> None:
@@ -87,8 +95,10 @@ class SwarmGuardConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"swarm guard: {name} must be finite and > 0, got {value}")
-        if not 0.0 < self.max_tilt_deg < 180.0:
-            raise ValueError(f"swarm guard: max_tilt_deg must be in (0, 180), got {self.max_tilt_deg}")
+        for name in ("max_tilt_deg", "max_platform_tilt_deg"):
+            value = getattr(self, name)
+            if not 0.0 < value < 180.0:  # NaN fails too
+                raise ValueError(f"swarm guard: {name} must be in (0, 180), got {value}")
 
 
 @dataclass(frozen=True)
@@ -138,6 +148,7 @@ class SwarmGuard:
         self._takeoff_height: float | None = None
         self._climb_since: float | None = None
         self._tilt_since: float | None = None
+        self._platform_tilt_since: float | None = None  #: [s] the own controller's platform tilt above the envelope
         self._latched: Verdict | None = None
 
     # ---- inputs ----------------------------------------------------------------------------------------------
@@ -161,10 +172,16 @@ class SwarmGuard:
         if peer is not None:
             peer.info_time = now
 
-    def on_own_controller_status(self, local_state_valid: bool, now: float) -> None:
+    def on_own_controller_status(self, local_state_valid: bool, now: float, platform_tilt: float = math.nan) -> None:
+        """The own controller's status: whether its state is valid, and the platform's tilt [rad] in that state
+        (NaN: unknown, the count of the platform envelope is left as it is)."""
         self._own_status_time = now
         if local_state_valid:
             self._estimate_valid_time = now
+        if math.isfinite(platform_tilt):
+            above = math.degrees(platform_tilt) > self.config.max_platform_tilt_deg
+            self._platform_tilt_since = (self._platform_tilt_since if self._platform_tilt_since is not None
+                                         else now) if above else None
 
     def on_local_position(self, height: float, climb_rate: float, tilt_deg: float, armed: bool, landed: bool,
                           now: float) -> None:
@@ -196,6 +213,9 @@ class SwarmGuard:
         if self._tilt_since is not None and now - self._tilt_since >= cfg.envelope_time:
             return (f"tilt above max_tilt {cfg.max_tilt_deg:g}° for {cfg.envelope_time:g} s (attitude failure, "
                     "PX4 FD_FAIL_R/P)")
+        if self._platform_tilt_since is not None and now - self._platform_tilt_since >= cfg.envelope_time:
+            return (f"platform tilt above max_platform_tilt {cfg.max_platform_tilt_deg:g}° for {cfg.envelope_time:g} "
+                    "s (the structure is out of control)")
         return ""
 
     def evaluate(self, now: float, setpoints_fresh: bool, flying: bool) -> Verdict:

@@ -166,11 +166,49 @@ def test_envelope_climb_rate_tilt_and_height_latch_until_disarmed():
     guard.on_local_position(math.nan, 0.0, 0.0, armed=True, landed=False, now=5.0)  # NaN: ignored, no crash
 
 
+def test_platform_envelope_latches_on_a_sustained_platform_tilt_only():
+    """The own controller's platform tilt above max_platform_tilt_deg for envelope_time is an own, latched ENVELOPE
+    verdict; a brief excess, a tilt below the limit and a NaN tilt (no state) are not."""
+    guard = healthy_guard()
+    cfg = guard.config
+    limit = math.radians(cfg.max_platform_tilt_deg)
+    for k in range(20):  # 50 Hz below the limit: nothing
+        guard.on_own_controller_status(True, 0.02 * k, limit - 0.01)
+        assert guard.evaluate(0.02 * k, True, True) == NONE
+    guard.on_own_controller_status(True, 0.4, limit + 0.01)  # above for less than envelope_time, then back
+    guard.on_own_controller_status(True, 0.4 + cfg.envelope_time - 0.02, limit + 0.01)
+    assert guard.evaluate(0.4 + cfg.envelope_time - 0.02, True, True) == NONE
+    guard.on_own_controller_status(True, 0.4 + cfg.envelope_time, limit - 0.01)  # the count restarts
+    assert guard.evaluate(0.4 + cfg.envelope_time + 0.1, True, True) == NONE
+    start = 1.0
+    guard.on_own_controller_status(True, start, limit + 0.2)
+    guard.on_own_controller_status(True, start + 0.1, math.nan)  # unknown: the count goes on
+    guard.on_own_controller_status(True, start + cfg.envelope_time, limit + 0.2)
+    verdict = guard.evaluate(start + cfg.envelope_time, True, True)
+    assert verdict.cause is Cause.ENVELOPE and verdict.latched and verdict.own
+    assert "platform tilt" in verdict.reason and f"{cfg.max_platform_tilt_deg:g}" in verdict.reason
+    guard.on_own_controller_status(True, 2.0, 0.0)  # level again: still latched (no rejoin)
+    assert guard.evaluate(2.0, True, True) == verdict
+    # a lower limit of the node's parameter applies
+    strict = SwarmGuard(SwarmGuardConfig(uav_id=1, max_platform_tilt_deg=20.0))
+    strict.on_own_controller_status(True, 0.0, math.radians(25.0))
+    strict.on_own_controller_status(True, 0.0 + cfg.envelope_time, math.radians(25.0))
+    assert strict.evaluate(cfg.envelope_time, True, True).cause is Cause.ENVELOPE
+    # on the ground nothing is judged (the tilt of a robot standing on its feet is not a flight)
+    grounded = SwarmGuard(SwarmGuardConfig(uav_id=1))
+    grounded.on_own_controller_status(True, 0.0, 1.0)
+    grounded.on_own_controller_status(True, 1.0, 1.0)
+    assert grounded.evaluate(1.0, True, flying=False) == NONE
+
+
 def test_guard_config_refuses_nonsense():
     with pytest.raises(ValueError, match="peer_status_deadline"):
         SwarmGuardConfig(peer_status_deadline=-1.0)
     with pytest.raises(ValueError, match="max_tilt_deg"):
         SwarmGuardConfig(max_tilt_deg=0.0)
+    for bad in (0.0, 180.0, math.nan):
+        with pytest.raises(ValueError, match="max_platform_tilt_deg"):
+            SwarmGuardConfig(max_platform_tilt_deg=bad)
 
 
 # ---- the EMERGENCY state -----------------------------------------------------------------------------------
