@@ -10,6 +10,17 @@ import math
 
 import numpy as np
 
+#: arrays up to this size are checked element by element in Python (0.7 µs for 4-18 values against 1.7 µs for
+#: ``np.isfinite(a).all()``: these helpers run ~11,000 times per simulated second in the graph, issue 15)
+_SMALL = 32
+
+
+def _finite(array: np.ndarray) -> bool:
+    """Every element of the float array finite."""
+    if array.size <= _SMALL:
+        return all(map(math.isfinite, array.ravel().tolist()))
+    return bool(np.isfinite(array).all())
+
 
 def as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     """Return ``value`` as a float array of exactly ``shape``; raise ValueError naming ``name`` otherwise."""
@@ -19,7 +30,7 @@ def as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
         raise ValueError(f"{name}: cannot convert to a float array ({error})") from None
     if array.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {array.shape}")
-    if not np.isfinite(array).all():
+    if not _finite(array):
         raise ValueError(f"{name}: contains NaN or inf")
     return array
 
@@ -34,7 +45,7 @@ def as_trailing(name: str, value, trailing: tuple[int, ...]) -> np.ndarray:
     k = len(trailing)
     if array.ndim < k or array.shape[array.ndim - k:] != trailing:
         raise ValueError(f"{name}: expected shape (..., {', '.join(map(str, trailing))}), got {array.shape}")
-    if not np.isfinite(array).all():
+    if not _finite(array):
         raise ValueError(f"{name}: contains NaN or inf")
     return array
 
@@ -56,7 +67,7 @@ def as_angles(name: str, value) -> np.ndarray:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name}: cannot convert to a float array ({error})") from None
-    if not np.isfinite(array).all():
+    if not _finite(array):
         raise ValueError(f"{name}: contains NaN or inf")
     return array
 
@@ -69,7 +80,7 @@ def as_vector(name: str, value, min_size: int = 0) -> np.ndarray:
         raise ValueError(f"{name}: cannot convert to a float array ({error})") from None
     if array.ndim != 1 or array.size < min_size:
         raise ValueError(f"{name}: expected a vector of length >= {min_size}, got shape {array.shape}")
-    if not np.isfinite(array).all():
+    if not _finite(array):
         raise ValueError(f"{name}: contains NaN or inf")
     return array
 

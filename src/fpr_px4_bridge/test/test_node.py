@@ -25,7 +25,7 @@ from rclpy.time import Time  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from fpr_msgs.msg import AttitudeThrustSetpoint, TeleopCommand, UavStatus  # noqa: E402
+from fpr_msgs.msg import AttitudeThrustSetpoint, ControllerStatus, TeleopCommand, UavStatus  # noqa: E402
 from fpr_px4_bridge import px4_protocol as p  # noqa: E402
 
 Q_NORTH = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # w, x, y, z
@@ -55,6 +55,9 @@ class SimTime:
         self.statuses = statuses
         self.ns = int(START_TIME * 1e9)
         self.setpoint: AttitudeThrustSetpoint | None = None
+        #: the own controller's status, published with each setpoint when set (the swarm guard's inputs)
+        self.controller_status: ControllerStatus | None = None
+        self.controller_status_pub = None
         self.last_publish: float | None = None  # [s] the controller's last setpoint
         self.published: list[float] = []  # [s] stamps of the controller's setpoints
         self.ticks: list[float] = []
@@ -93,6 +96,9 @@ class SimTime:
                 self.setpoint_pub.publish(self.setpoint)
                 self.last_publish = self.now
                 self.published.append(self.now)
+            if self.controller_status is not None:
+                self.controller_status.header.stamp = stamp.to_msg()
+                self.controller_status_pub.publish(self.controller_status)
 
     def run_until(self, predicate, sim_timeout: float, what: str) -> float:
         deadline = self.now + sim_timeout
@@ -153,11 +159,14 @@ def _graph(fake_px4_factory, free_port, swarm_guard: bool):
     clock_pub = helper.create_publisher(Clock, "/clock", 10)
     setpoint_pub = helper.create_publisher(AttitudeThrustSetpoint, "/fpr/uav1/setpoint", qos)
     teleop_pub = helper.create_publisher(TeleopCommand, "/fpr/teleop", qos)
+    controller_status_pub = helper.create_publisher(ControllerStatus, "/fpr/uav1/controller_status", qos)
     statuses, imus = [], []
     helper.create_subscription(UavStatus, "/fpr/uav1/status", statuses.append, 10)
     helper.create_subscription(Imu, "/fpr/uav1/imu", imus.append, qos)
     sim = clock["sim"] = SimTime(node, fake, clock_pub, setpoint_pub, statuses)
+    sim.controller_status_pub = controller_status_pub
     assert wait_for(lambda: setpoint_pub.get_subscription_count() > 0 and teleop_pub.get_subscription_count() > 0
+                    and (not swarm_guard or controller_status_pub.get_subscription_count() > 0)
                     and clock_pub.get_subscription_count() >= 2 and node.status_pub.get_subscription_count() > 0
                     and node.imu_pub.get_subscription_count() > 0, timeout=10.0), "discovery"
     yield node, fake, sim, teleop_pub, statuses, imus
@@ -291,6 +300,31 @@ def test_swarm_guard_stale_setpoints_hold_then_rejoin_when_the_controller_is_bac
                          p.Px4MainMode.OFFBOARD and c.t > back]
     assert offboard_requests and offboard_requests[0].t - back >= 0.5 - 0.05  # rejoin_delay
     assert not statuses[-1].emergency and statuses[-1].emergency_reason == ""
+
+
+def test_swarm_guard_platform_envelope_from_the_controller_status(guarded_graph):
+    """The platform's tilt the own controller reports (ControllerStatus.platform_tilt) above max_platform_tilt_deg
+    (45°) for envelope_time (0.3 s) -> EMERGENCY (own, latched: a level platform afterwards does not rejoin); 40°
+    for as long is nothing."""
+    node, fake, sim, teleop_pub, statuses, imus = guarded_graph
+    status = ControllerStatus()
+    status.uav_id, status.local_state_valid, status.platform_tilt = 1, True, math.radians(40.0)
+    sim.controller_status = status
+    sim.run_until(lambda: statuses and statuses[-1].connected, 1.0, "connected")
+    teleop_pub.publish(teleop(TeleopCommand.MODE_FLY))
+    sim.run_until(lambda: fake.armed, 2.0, "armed")
+    sim.setpoint = setpoint()
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_OFFBOARD, 3.0, "OFFBOARD")
+    sim.run_for(1.0)
+    assert statuses[-1].state == UavStatus.STATE_OFFBOARD  # 40°: inside the envelope
+    status.platform_tilt = math.radians(50.0)
+    tilted = sim.now
+    sim.run_until(lambda: statuses[-1].state == UavStatus.STATE_EMERGENCY, 1.0, "EMERGENCY")
+    assert sim.now - tilted >= 0.3 - 0.03  # envelope_time
+    assert statuses[-1].emergency_own and "platform tilt" in statuses[-1].emergency_reason
+    status.platform_tilt = 0.0
+    sim.run_for(1.5)
+    assert statuses[-1].state == UavStatus.STATE_EMERGENCY  # latched: no rejoin
 
 
 def test_bad_setpoints_never_reach_the_peer_and_garbage_is_counted(graph, corrupt_datagrams):
