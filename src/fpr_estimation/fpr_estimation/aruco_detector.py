@@ -39,6 +39,10 @@ _PARAMETERS = {
                                            "(OpenCV's 5 chases pixel noise: ~50x slower on noisy frames)", high=255),
     "ambiguity_threshold": Param(2.0, "IPPE ambiguity ratio below which the solution closest to the previous is kept",
                                  low=1.0, high=1000.0),
+    "roi_margin": Param(0.5, "region of interest: the last marker's bounding box grown by this fraction of its size "
+                        "on every side is searched first, the whole frame only when the marker is not there (same "
+                        "corners, ~5x less CPU); 0: every frame searched whole", high=10.0),
+    "roi_border": Param(16, "[px] added to the region of interest's margin on every side", high=10000),
     "publish_debug_image": (False, "publish marker/debug_image with the pose axes drawn"),
     "log_interval": (2.0, "[s] minimum interval between repeated warnings"),
 }
@@ -62,7 +66,8 @@ class ArucoDetectorNode(Node):
             adaptive_thresh_win_size_step=int(p["adaptive_thresh_win_size_step"]),
             min_marker_perimeter_rate=float(p["min_marker_perimeter_rate"]),
             april_tag_min_white_black_diff=int(p["april_tag_min_white_black_diff"]),
-            ambiguity_threshold=float(p["ambiguity_threshold"]))
+            ambiguity_threshold=float(p["ambiguity_threshold"]), roi_margin=float(p["roi_margin"]),
+            roi_border=int(p["roi_border"]))
         self._detector = ArucoPoseDetector(self._config)
         self._debug = bool(p["publish_debug_image"])
         self._log_interval = float(p["log_interval"])

@@ -135,3 +135,55 @@ def test_no_marker_and_bad_images():
     assert decode_image("rgb8", 3, 2, 9, rgb.tobytes()).shape == (2, 3)
     padded = decode_image("mono8", 3, 2, 4, bytes([1, 2, 3, 99, 4, 5, 6, 99]))
     assert padded.tolist() == [[1, 2, 3], [4, 5, 6]]
+
+
+def _moving_marker(calibration, frames=40, seed=5, noise=2.0):
+    """A marker seen from one UAV while the platform rolls slowly (20 Hz frames, 0.1° per frame) and, halfway, jumps
+    (a new configuration: the marker far from where it was); the simulator's pixel noise."""
+    renderer = MarkerRenderer(calibration.camera, calibration.marker_size)
+    params = default_parameters()
+    rng = np.random.default_rng(seed)
+    images = []
+    for k in range(frames):
+        legs = np.radians([55.0, 60.0, 50.0]) if k < frames // 2 else np.radians([72.0, 47.0, 66.0])
+        poses, _, _ = uav_pose_in_platform(params, legs, np.radians(0.1 * k), 0.0, 0.3)
+        truth = compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(poses[0]),
+                                   calibration.platform_T_marker)
+        frame = renderer.render(truth, noise_sigma=noise, rng=rng)
+        assert frame.in_view
+        images.append(frame.image)
+    return images
+
+
+def test_region_of_interest_gives_the_whole_frame_s_detection():
+    """The region of interest (default) finds the same corners and pose as a whole-frame search of every frame
+    (within 1e-3 px), searches most frames in the region only and falls back to the whole frame when the marker
+    jumped out of it; an empty frame forgets the region."""
+    calibration = VisionCalibration()
+    images = _moving_marker(calibration)
+    tracking = ArucoPoseDetector()
+    whole = ArucoPoseDetector(ArucoConfig(roi_margin=0.0))
+    for k, image in enumerate(images):
+        expected = whole.detect(image, calibration.camera)
+        observation = tracking.detect(image, calibration.camera)
+        assert expected is not None and observation is not None, f"frame {k}"
+        assert np.abs(observation.corners - expected.corners).max() < 1e-3
+        assert np.abs(observation.camera_T_marker - expected.camera_T_marker).max() < 1e-5  # [m], rotation
+        x0, y0, x1, y1 = tracking.roi
+        low, high = observation.corners.min(axis=0), observation.corners.max(axis=0)
+        assert (np.array([x0, y0]) <= low).all() and (high <= np.array([x1, y1])).all()
+        assert x1 - x0 < 0.5 * image.shape[1]  # a region, not the frame
+    assert tracking.roi_misses == 1 and tracking.roi_hits == len(images) - 2  # the first frame, the jump
+    assert whole.roi is None and whole.roi_hits == whole.roi_misses == 0
+    empty = np.full_like(images[0], 110)
+    assert tracking.detect(empty, calibration.camera) is None and tracking.roi is None
+    assert tracking.roi_misses == 2
+    tracking.detect(images[0], calibration.camera)
+    small = images[0][:100, :100]  # a smaller frame than the region was made for: no error
+    tracking.detect(small, calibration.camera)
+
+
+def test_region_of_interest_settings_are_bounded():
+    for bad in ({"roi_margin": -0.1}, {"roi_margin": 11.0}, {"roi_border": -1}):
+        with pytest.raises(ValueError, match="roi_margin"):
+            ArucoConfig(**bad)

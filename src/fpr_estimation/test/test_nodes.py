@@ -124,6 +124,13 @@ def test_aruco_detector_node(graph, scene):
     q = np.array([msg.pose.orientation.w, msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z])
     assert abs(abs(q @ rotmat_to_quat(camera_T_marker[:3, :3])) - 1.0) < 1e-4
     assert msg.reprojection_error < 0.5 and msg.ambiguity_ratio > 1.0 and len(msg.corners) == 8
+    # the next frames are searched in the region of interest first (roi_margin 0.5 by default): same corners
+    assert node._detector.roi is not None
+    hits, count = node._detector.roi_hits, len(received)
+    image_pub.publish(good)
+    assert wait_for(lambda: len(received) > count)
+    assert node._detector.roi_hits > hits
+    assert list(received[-1].corners) == pytest.approx(list(msg.corners), abs=1e-3)
 
 
 def test_pose_estimator_node_with_sim_time(graph, scene):
