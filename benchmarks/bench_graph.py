@@ -55,7 +55,10 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # it converted each message once for all subscribers
           "sweep, one conversion per subscription": (True, True, 100.0, "ideal", "sweep-copy"),
           # the sweep with every message through DDS (the default before fpr_experiments.intra_process)
-          "sweep, every message through DDS": (True, True, 100.0, "ideal", "sweep-dds")}
+          "sweep, every message through DDS": (True, True, 100.0, "ideal", "sweep-dds"),
+          # the default with the ArUco detectors searching every frame whole (before their region of interest)
+          "default, ArUco whole frames (roi_margin 0)": (True, True, 100.0, "ideal", "sweep",
+                                                          {"aruco_detector": {"roi_margin": 0.0}})}
 
 
 def _cpu() -> float:
@@ -102,7 +105,7 @@ def overlap_bound(period_costs: list[tuple[float, float, float]], control_rate: 
 
 def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
              realism: str = "ideal", executor: str = "sweep", simulator_through_dds: bool = False,
-             measure_periods: bool = False) -> dict:
+             measure_periods: bool = False, node_parameters: dict | None = None) -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -110,7 +113,8 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
 
         model = {"controller": {"model_file": MODELS.resolve(f"fpr_n{n}_unequal")}}
     options = GraphOptions(n=n, mode="communicating", cameras=cameras, scenario=scenario, script=script,
-                           parameters={"simulator": {"clock_rate": clock_rate}, **model}, realism=realism)
+                           parameters={"simulator": {"clock_rate": clock_rate}, **model, **(node_parameters or {})},
+                           realism=realism)
     load_before = os.getloadavg()[0]
     with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
                         executor=executor if deterministic else None, simulator_through_dds=simulator_through_dds,
@@ -148,8 +152,9 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}", flush=True)
     for case in args.cases.split(","):
         baseline = None
-        for name, (deterministic, lean, clock_rate, realism, executor) in levers:
-            r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor)
+        for name, (deterministic, lean, clock_rate, realism, executor, *node_parameters) in levers:
+            r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor,
+                         node_parameters=node_parameters[0] if node_parameters else None)
             baseline = baseline or r
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
