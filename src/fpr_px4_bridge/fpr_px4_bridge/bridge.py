@@ -440,14 +440,15 @@ class Px4Bridge:
         return decision.events + self.take_events()
 
     def _feed_guard_from_telemetry(self, now: float) -> None:
-        """The envelope inputs of the swarm guard: PX4's local position (height, climb rate) and the tilt."""
+        """The envelope inputs of the swarm guard: PX4's local position (height, climb rate, horizontal position)
+        and the tilt."""
         position = self.telemetry.local_position
         attitude = self.telemetry.attitude
         if position is None or attitude is None or now - position.stamp > 0.5:
             return
         tilt = math.degrees(quat_tilt(attitude))
         self.guard.on_local_position(position.height, position.climb_rate, tilt, self.machine.armed,
-                                     not self.machine.armed, now)
+                                     not self.machine.armed, now, position.north, position.east)
 
     # ---- reception -----------------------------------------------------------------------------------------
     def handle_message(self, msg, now: float):

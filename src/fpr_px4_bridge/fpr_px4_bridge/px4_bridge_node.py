@@ -110,6 +110,9 @@ _PARAMETERS = {
                                    "the link outages the NC fallback (4.32) rides out)", low=0.1, high=600.0),
     "max_height": Param(10.0, "[m] flight envelope: height above the take-off point (PX4 local position)",
                         low=0.1, high=10000.0),
+    "max_distance": Param(20.0, "[m] flight envelope: horizontal distance from the take-off point (PX4 local "
+                          "position; a geofence like PX4's GF_MAX_HOR_DIST: set it to the flight area)", low=0.1,
+                          high=100000.0),
     "max_climb_rate": Param(2.0, "[m/s] flight envelope: climb rate, for envelope_time", low=0.1, high=100.0),
     "max_tilt_deg": Param(60.0, "[deg] flight envelope: UAV tilt, for envelope_time (PX4 FD_FAIL_R / FD_FAIL_P)",
                           low=1.0, high=179.0),
@@ -183,6 +186,7 @@ class Px4BridgeNode(Node):
                 enabled=bool(p["swarm_guard"]), uav_id=uav_id, estimate_deadline=float(p["estimate_deadline"]),
                 peer_status_deadline=float(p["peer_status_deadline"]),
                 peer_silence_deadline=float(p["peer_silence_deadline"]), max_height=float(p["max_height"]),
+                max_distance=float(p["max_distance"]),
                 max_climb_rate=float(p["max_climb_rate"]), max_tilt_deg=float(p["max_tilt_deg"]),
                 max_platform_tilt_deg=float(p["max_platform_tilt_deg"]), envelope_time=float(p["envelope_time"])))
         url = p["connection_url"] or f"udp://127.0.0.1:{14540 + uav_id - 1}"

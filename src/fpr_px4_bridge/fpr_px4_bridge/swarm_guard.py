@@ -11,7 +11,9 @@ OWN (this UAV is the one in trouble; said in its UavStatus so that the peers fol
   for ``estimate_deadline``, or its status stopped for that long, after it had one: the pose estimator died or is
   blind (an estimator that has not delivered yet is the start-up, not a fault: the controller holds meanwhile);
 - ``envelope`` (latched until landed: no rejoin): the UAV's height above its take-off point (PX4's local
-  position) above ``max_height``; its climb rate above ``max_climb_rate`` for ``envelope_time``; its tilt above
+  position) above ``max_height``; its horizontal distance from the take-off point above ``max_distance`` (a
+  geofence like PX4's GF_MAX_HOR_DIST: a drifting estimate or a stuck stick must not fly the robot out of its
+  flight area; set it to the area's size); its climb rate above ``max_climb_rate`` for ``envelope_time``; its tilt above
   ``max_tilt`` for ``envelope_time`` (PX4's attitude-failure detector FD_FAIL_R / FD_FAIL_P 60° with
   FD_FAIL_R_TTRI / FD_FAIL_P_TTRI 0.3 s, here as a trigger of the swarm's descent, not a flight termination);
   the **platform's** tilt, as the own controller's state has it (``ControllerStatus.platform_tilt``), above
@@ -83,6 +85,7 @@ class SwarmGuardConfig:
     peer_status_deadline: float = 0.5    #: [s] a peer's UavStatus this old while its ζ arrives -> PEER
     peer_silence_deadline: float = 5.0   #: [s] neither UavStatus nor ζ from a peer this long -> PEER
     max_height: float = 10.0             #: [m] above the take-off point (PX4 local position) -> ENVELOPE
+    max_distance: float = 20.0           #: [m] horizontally from the take-off point (PX4 local position) -> ENVELOPE
     max_climb_rate: float = 2.0          #: [m/s] upwards, for envelope_time -> ENVELOPE
     max_tilt_deg: float = 60.0           #: [°] UAV tilt for envelope_time (PX4 FD_FAIL_R / FD_FAIL_P) -> ENVELOPE
     #: [°] platform tilt (own controller's state) for envelope_time -> ENVELOPE (1.5× command_max_tilt_deg 30°)
@@ -91,7 +94,7 @@ class SwarmGuardConfig:
 
     def __post_init__(self) -> None:
         for name in ("estimate_deadline", "peer_status_deadline", "peer_silence_deadline", "max_height",
-                     "max_climb_rate", "envelope_time"):
+                     "max_distance", "max_climb_rate", "envelope_time"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"swarm guard: {name} must be finite and > 0, got {value}")
@@ -146,6 +149,8 @@ class SwarmGuard:
         self._own_status_time = -math.inf  #: last own controller status, valid or not
         self._height: float | None = None
         self._takeoff_height: float | None = None
+        self._horizontal: tuple[float, float] | None = None  #: [m] PX4's local north, east
+        self._takeoff_horizontal: tuple[float, float] | None = None
         self._climb_since: float | None = None
         self._tilt_since: float | None = None
         self._platform_tilt_since: float | None = None  #: [s] the own controller's platform tilt above the envelope
@@ -184,14 +189,19 @@ class SwarmGuard:
                                          else now) if above else None
 
     def on_local_position(self, height: float, climb_rate: float, tilt_deg: float, armed: bool, landed: bool,
-                          now: float) -> None:
-        """PX4's local position (height [m] up, climb rate [m/s] up) and the UAV's tilt [°]."""
+                          now: float, north: float = math.nan, east: float = math.nan) -> None:
+        """PX4's local position (height [m] up, climb rate [m/s] up, north and east [m]: NaN unknown, the
+        geofence then keeps its last ones) and the UAV's tilt [°]."""
         cfg = self.config
         if not all(math.isfinite(v) for v in (height, climb_rate, tilt_deg)):
             return
         self._height = height
         if landed or not armed or self._takeoff_height is None:
             self._takeoff_height = height  # on the ground (or first seen in the air): the reference height
+        if math.isfinite(north) and math.isfinite(east):
+            self._horizontal = (north, east)
+            if landed or not armed or self._takeoff_horizontal is None:
+                self._takeoff_horizontal = self._horizontal
         self._climb_since = (self._climb_since if self._climb_since is not None else now) \
             if climb_rate > cfg.max_climb_rate else None
         self._tilt_since = (self._tilt_since if self._tilt_since is not None else now) \
@@ -208,6 +218,10 @@ class SwarmGuard:
                 self._height - self._takeoff_height > cfg.max_height:
             height = self._height - self._takeoff_height
             return f"height {height:.1f} m above take-off > max_height {cfg.max_height:g} m"
+        if self._horizontal is not None and self._takeoff_horizontal is not None:
+            distance = math.dist(self._horizontal, self._takeoff_horizontal)
+            if distance > cfg.max_distance:
+                return f"{distance:.1f} m from the take-off point > max_distance {cfg.max_distance:g} m (geofence)"
         if self._climb_since is not None and now - self._climb_since >= cfg.envelope_time:
             return f"climbing faster than max_climb_rate {cfg.max_climb_rate:g} m/s for {cfg.envelope_time:g} s"
         if self._tilt_since is not None and now - self._tilt_since >= cfg.envelope_time:

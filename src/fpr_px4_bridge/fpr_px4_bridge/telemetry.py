@@ -54,6 +54,8 @@ class LocalPositionSample:
     stamp: float                      #: [s] local time
     height: float                     #: [m] up (−z of LOCAL_POSITION_NED), from PX4's local origin
     climb_rate: float                 #: [m/s] up (−vz)
+    north: float = math.nan           #: [m] x of LOCAL_POSITION_NED (NaN: not finite)
+    east: float = math.nan            #: [m] y of LOCAL_POSITION_NED
 
 
 @dataclass(frozen=True)
@@ -159,7 +161,9 @@ class TelemetryDecoder:
             return None
         stamp = self._boot_ms_stamp(msg.time_boot_ms, received)
         if math.isfinite(msg.z):
-            self.local_position = LocalPositionSample(stamp=received, height=-float(msg.z), climb_rate=-float(v[2]))
+            north, east = (float(c) if math.isfinite(c) else math.nan for c in (msg.x, msg.y))
+            self.local_position = LocalPositionSample(stamp=received, height=-float(msg.z), climb_rate=-float(v[2]),
+                                                      north=north, east=east)
         v_flu = quat_rotate(quat_conjugate(self.attitude), ned_to_enu(v))
         return BodyVelocitySample(stamp=stamp, linear=v_flu, angular=self.rates)
 

@@ -273,7 +273,7 @@ def test_telemetry_is_converted_to_enu_flu(setup):
     peer.send(peer.mav.odometry_encode(time_usec=1_000_000, frame_id=1, child_frame_id=12, x=0.0, y=0.0, z=0.0,
                                        q=q_ned, vx=1.0, vy=2.0, vz=-0.5, rollspeed=0.1, pitchspeed=-0.2,
                                        yawspeed=0.3, pose_covariance=[0.0] * 21, velocity_covariance=[0.0] * 21))
-    peer.send(peer.mav.local_position_ned_encode(time_boot_ms=1000, x=0.0, y=0.0, z=0.0, vx=1.0, vy=0.0, vz=0.0))
+    peer.send(peer.mav.local_position_ned_encode(time_boot_ms=1000, x=3.0, y=-4.0, z=-2.5, vx=1.0, vy=0.0, vz=0.0))
     samples = []
     for _ in range(20):
         samples += bridge.poll(5.0, timeout=0.2)
@@ -290,6 +290,8 @@ def test_telemetry_is_converted_to_enu_flu(setup):
     np.testing.assert_allclose(odo.linear, [1.0, -2.0, 0.5], atol=1e-6)
     # NED north velocity seen from a body yawed 0.6 rad (NED) to the right of north: FLU (cos, +sin... left<0)
     np.testing.assert_allclose(local.linear, [math.cos(0.6), math.sin(0.6), 0.0], atol=1e-6)
+    position = bridge.telemetry.local_position  # the swarm guard's envelope inputs (height, geofence)
+    assert (position.height, position.north, position.east, position.climb_rate) == pytest.approx((2.5, 3.0, -4.0, 0.0))
 
 
 def _attitude_quaternion(peer, boot_ms):

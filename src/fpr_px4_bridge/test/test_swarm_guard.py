@@ -166,6 +166,29 @@ def test_envelope_climb_rate_tilt_and_height_latch_until_disarmed():
     guard.on_local_position(math.nan, 0.0, 0.0, armed=True, landed=False, now=5.0)  # NaN: ignored, no crash
 
 
+def test_geofence_from_the_take_off_point_latches_and_ignores_an_unknown_position():
+    cfg = SwarmGuardConfig(uav_id=1, max_distance=5.0)
+    guard = SwarmGuard(cfg)
+    guard.on_local_position(0.0, 0.0, 0.0, armed=False, landed=True, now=0.0, north=10.0, east=-3.0)  # take-off
+    guard.on_local_position(1.0, 0.0, 0.0, armed=True, landed=False, now=1.0, north=13.0, east=0.9)  # 4.9 m
+    assert guard.evaluate(1.0, True, True) == NONE
+    guard.on_local_position(1.0, 0.0, 0.0, armed=True, landed=False, now=2.0, north=math.nan, east=0.0)  # unknown
+    assert guard.evaluate(2.0, True, True) == NONE
+    guard.on_local_position(1.0, 0.0, 0.0, armed=True, landed=False, now=3.0, north=14.0, east=0.1)  # 5.1 m
+    verdict = guard.evaluate(3.0, True, True)
+    assert verdict.cause is Cause.ENVELOPE and verdict.latched and "geofence" in verdict.reason
+    assert "5.1 m" in verdict.reason and "max_distance 5 m" in verdict.reason
+    guard.on_local_position(1.0, 0.0, 0.0, armed=True, landed=False, now=4.0, north=10.0, east=-3.0)  # back
+    assert guard.evaluate(4.0, True, True) == verdict  # latched until landed
+    # first seen in the air (a hover start): that point is the reference
+    airborne = SwarmGuard(cfg)
+    airborne.on_local_position(1.5, 0.0, 0.0, armed=True, landed=False, now=0.0, north=-7.0, east=2.0)
+    airborne.on_local_position(1.5, 0.0, 0.0, armed=True, landed=False, now=1.0, north=-3.0, east=2.0)
+    assert airborne.evaluate(1.0, True, True) == NONE
+    with pytest.raises(ValueError, match="max_distance"):
+        SwarmGuardConfig(max_distance=0.0)
+
+
 def test_platform_envelope_latches_on_a_sustained_platform_tilt_only():
     """The own controller's platform tilt above max_platform_tilt_deg for envelope_time is an own, latched ENVELOPE
     verdict; a brief excess, a tilt below the limit and a NaN tilt (no state) are not."""
