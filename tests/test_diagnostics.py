@@ -59,6 +59,8 @@ def test_nodes_say_their_health_on_diagnostics():
         assert bridge.level == DiagnosticStatus.ERROR and "PX4 not heard" in bridge.message, bridge
         assert estimator.level == DiagnosticStatus.WARN and "not initialised" in estimator.message
         assert all(s.hardware_id == "uav1" and s.values for s in (controller, bridge, estimator))
+        # the platform tilt the bridges' envelope watches: unknown without a state
+        assert {v.key: v.value for v in controller.values}["platform tilt [deg]"] == "nan"
     finally:
         for node in nodes:
             node.destroy_node()

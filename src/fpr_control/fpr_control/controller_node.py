@@ -575,6 +575,7 @@ class ControllerNode(Node):
             "zeta ages [s]": [float(a) for a in out.info_ages], "local state valid": bool(out.local_state_valid),
             "thrust saturated": bool(out.thrust_saturated), "tilt saturated": bool(out.tilt_saturated),
             "loop time [ms]": 1000.0 * float(out.loop_time),
+            "platform tilt [deg]": math.degrees(float(out.platform_tilt)),  # the bridges' envelope: 45° by default
             "contact guard": STATE_NAMES.get(out.contact_guard_state, "?"),
             "applied contact force [N]": float(out.applied_contact_force)})
         self.diagnostics_pub.publish(to_diagnostic_array([report], stamp))
