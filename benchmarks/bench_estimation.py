@@ -19,7 +19,7 @@ from fpr_estimation.ekf import RelativePoseEKF  # noqa: E402
 from fpr_estimation.estimator import EstimatorConfig, PoseEstimatorCore  # noqa: E402
 from fpr_estimation.mekf import RelativePoseMEKF  # noqa: E402
 from fpr_estimation.synthetic import uav_pose_in_platform  # noqa: E402
-from fpr_model.calibration import VisionCalibration, compose_transforms, invert_transform  # noqa: E402
+from fpr_model.calibration import VisionCalibration, camera_T_marker_of  # noqa: E402
 from fpr_model.parameters import default_parameters  # noqa: E402
 from fpr_model.rotations import quat_from_rotvec  # noqa: E402
 from fpr_sim.camera_renderer import MarkerRenderer  # noqa: E402
@@ -94,8 +94,7 @@ def aruco_roi_lever(renderer, calibration) -> None:
         frames = []
         for k in range(8):
             pose = uav_pose_in_platform(params, legs, roll0 + np.radians(0.2 * k), pitch)[0][uav]
-            truth = compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(pose),
-                                       calibration.platform_T_marker)
+            truth = camera_T_marker_of(pose, calibration.body_T_camera, calibration.platform_T_marker)
             frame = renderer.render(truth, noise_sigma=2.0, rng=rng)
             if frame.in_view:
                 frames.append((frame.image, truth))
@@ -129,8 +128,7 @@ def main():
         legs = rng.uniform(np.radians(45), np.radians(75), 3)
         roll, pitch = rng.uniform(-np.radians(10), np.radians(10), 2)
         for pose in uav_pose_in_platform(params, legs, roll, pitch)[0]:
-            poses.append(compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(pose),
-                                            calibration.platform_T_marker))
+            poses.append(camera_T_marker_of(pose, calibration.body_T_camera, calibration.platform_T_marker))
     renderer = MarkerRenderer(calibration.camera)
     render_times = timeit(lambda k: renderer.render(poses[k % len(poses)]), 300)
     noisy_times = timeit(lambda k: renderer.render(poses[k % len(poses)], blur_sigma=0.8, noise_sigma=3.0, rng=rng),

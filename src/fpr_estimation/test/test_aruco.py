@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from fpr_estimation.aruco import ArucoConfig, ArucoPoseDetector, decode_image, validate_mono_image
 from fpr_estimation.synthetic import uav_pose_in_platform
-from fpr_model.calibration import CameraModel, VisionCalibration, compose_transforms, invert_transform
+from fpr_model.calibration import CameraModel, VisionCalibration, camera_T_marker_of
 from fpr_model.parameters import default_parameters
 from fpr_sim.camera_renderer import MarkerRenderer
 
@@ -23,8 +23,7 @@ def _scenes(count, seed, calibration):
         roll, pitch = rng.uniform(-np.radians(10.0), np.radians(10.0), 2)
         poses, _, _ = uav_pose_in_platform(params, legs, roll, pitch, rng.uniform(-np.pi, np.pi))
         for pose in poses:
-            yield compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(pose),
-                                     calibration.platform_T_marker)
+            yield camera_T_marker_of(pose, calibration.body_T_camera, calibration.platform_T_marker)
 
 
 def _run(calibration, count=120, seed=3, **render_kwargs):
@@ -147,8 +146,7 @@ def _moving_marker(calibration, frames=40, seed=5, noise=2.0):
     for k in range(frames):
         legs = np.radians([55.0, 60.0, 50.0]) if k < frames // 2 else np.radians([72.0, 47.0, 66.0])
         poses, _, _ = uav_pose_in_platform(params, legs, np.radians(0.1 * k), 0.0, 0.3)
-        truth = compose_transforms(invert_transform(calibration.body_T_camera), invert_transform(poses[0]),
-                                   calibration.platform_T_marker)
+        truth = camera_T_marker_of(poses[0], calibration.body_T_camera, calibration.platform_T_marker)
         frame = renderer.render(truth, noise_sigma=noise, rng=rng)
         assert frame.in_view
         images.append(frame.image)

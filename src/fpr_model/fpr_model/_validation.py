@@ -94,6 +94,6 @@ def all_finite(*values) -> bool:
         if isinstance(value, float | int):
             if not math.isfinite(value):
                 return False
-        elif not all(map(math.isfinite, np.asarray(value, dtype=float).ravel().tolist())):
+        elif not _finite(np.asarray(value, dtype=float)):
             return False
     return True
