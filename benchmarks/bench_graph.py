@@ -58,7 +58,10 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           "sweep, every message through DDS": (True, True, 100.0, "ideal", "sweep-dds"),
           # the default with the ArUco detectors searching every frame whole (before their region of interest)
           "default, ArUco whole frames (roi_margin 0)": (True, True, 100.0, "ideal", "sweep",
-                                                          {"aruco_detector": {"roi_margin": 0.0}})}
+                                                          {"aruco_detector": {"roi_margin": 0.0}}),
+          # the default with PX4's own telemetry rates (before the bridges asked for theirs: ATTITUDE 100 Hz on)
+          "default, PX4's telemetry rates (configure_streams false)": (True, True, 100.0, "ideal", "sweep",
+                                                                       {"px4_bridge": {"configure_streams": False}})}
 
 
 def _cpu() -> float:

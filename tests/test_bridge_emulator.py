@@ -32,6 +32,7 @@ from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge  # noqa: E402
 from fpr_px4_bridge.link import MavlinkLink  # noqa: E402
 from fpr_px4_bridge.offboard import BridgeState, OffboardConfig, TeleopMode  # noqa: E402
 from fpr_px4_bridge.px4_protocol import Px4AutoSubMode, Px4MainMode  # noqa: E402
+from fpr_px4_bridge.streams import DEFAULT_MESSAGE_RATES, parse_message_rates  # noqa: E402
 from fpr_px4_bridge.telemetry import BodyVelocitySample, ImuSample  # noqa: E402
 from fpr_sim.scenario import Px4Config, scenario_from_dict  # noqa: E402
 from fpr_sim.simulation import Simulation, SimulationOptions  # noqa: E402
@@ -69,11 +70,12 @@ def _scenario(mode: str):
 class Rig:
     """Three bridge cores + the simulation core, stepped together (see the module doc)."""
 
-    def __init__(self, scenario) -> None:
+    def __init__(self, scenario, message_rates=()) -> None:
         self.links = [MavlinkLink("udp://127.0.0.1:0", system_id=i, target_system=i) for i in (1, 2, 3)]
         offboard = OffboardConfig(command_max_attempts=20)
         self.bridges = [Px4Bridge(BridgeConfig(uav_id=i, target_system=i, a_f=thrust_coefficients(i).a_f,
-                                               b_f=thrust_coefficients(i).b_f, offboard=offboard), link)
+                                               b_f=thrust_coefficients(i).b_f, offboard=offboard,
+                                               message_rates=message_rates), link)
                         for i, link in zip((1, 2, 3), self.links, strict=True)]
         ports = tuple(link.local_address[1] for link in self.links)
         # the stream-loss test silences the controllers on purpose: a stall is counted and the simulation flies on
@@ -350,6 +352,35 @@ CLOCK_STEP = 0.004  # [s] /clock period of the node test: 250 Hz of simulation t
 #: on PX4's socket before the simulation reaches the boundary: the lockstep waits only once, in vain, at the silence
 NODE_LOCKSTEP_TIMEOUT = 0.2
 WALL_LIMIT = 60.0  # [s] hang guard per phase; the phases themselves are judged in simulation time only
+
+
+def test_the_bridges_telemetry_rates_reach_the_emulated_px4_and_attitude_stops():
+    """The default message_rates (fpr_px4_bridge.streams) against fpr_sim's emulators: each PX4 takes them
+    (SET_MESSAGE_INTERVAL, ACKed), ATTITUDE stops reaching the bridge, the IMU and local position stay at 50 Hz."""
+    rig = Rig(_scenario("ground"), message_rates=parse_message_rates(DEFAULT_MESSAGE_RATES))
+    try:
+        kinds: list[dict[str, int]] = [{} for _ in range(3)]
+        for i, bridge in enumerate(rig.bridges):
+            def counting(msg, now, handle=bridge.handle_message, seen=kinds[i]):
+                seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+                return handle(msg, now)
+            bridge.handle_message = counting
+        done_at = rig.run_until(lambda: all(b.streams.done and b.streams.rounds == 1 for b in rig.bridges), 2.0,
+                                "telemetry rates answered")
+        assert done_at <= 0.8  # first HEARTBEAT at 0.5 s, then four ACKed requests one period apart
+        for emulator in rig.sim.emulators:
+            assert emulator.intervals[30] is None  # ATTITUDE stopped
+            assert emulator.intervals[31] == emulator.intervals[105] == emulator.intervals[32] == 20000
+        rig.run_until(lambda: rig.now >= done_at + 0.1, 1.0, "in flight")  # frames in flight before the stop
+        for seen in kinds:
+            seen.clear()
+        rig.run_until(lambda: rig.now >= done_at + 1.1 - 1e-9, 2.0, "one more second")
+        for seen in kinds:
+            assert "ATTITUDE" not in seen, seen
+            for kind in ("ATTITUDE_QUATERNION", "HIGHRES_IMU", "LOCAL_POSITION_NED"):
+                assert seen[kind] == pytest.approx(50, abs=1), (kind, seen)
+    finally:
+        rig.close()
 
 
 def _wait_wall(condition, timeout: float, what: str) -> None:

@@ -5,7 +5,8 @@ One :class:`Px4Bridge` per UAV. The node calls, with its ROS clock time ``now`` 
   streaming and the current stream slot is free, so the latency to the wire is then one encode + send);
 - :meth:`Px4Bridge.on_teleop` for each ``/fpr/teleop`` mode;
 - :meth:`Px4Bridge.tick` at ``stream_rate`` (>= 50 Hz): state machine, the stream slots (below), COMMAND_LONGs,
-  the 1 Hz HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
+  the telemetry rates asked of PX4 once it is heard (``message_rates``, :mod:`fpr_px4_bridge.streams`), the 1 Hz
+  HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER);
 - :meth:`Px4Bridge.poll` from its receive thread: PX4 messages -> state machine and ENU/FLU telemetry samples.
 
 Stream rate: one SET_ATTITUDE_TARGET per stream period T = 1 / ``stream_rate`` while streaming. Time is cut into
@@ -70,14 +71,16 @@ from fpr_model.battery import max_thrust, normalized_thrust
 from fpr_model.rotations import quat_tilt
 
 from fpr_px4_bridge.link import MavlinkLink
-from fpr_px4_bridge.offboard import BridgeState, LogEvent, OffboardConfig, OffboardStateMachine
+from fpr_px4_bridge.offboard import BridgeState, CommandRequest, LogEvent, OffboardConfig, OffboardStateMachine
 from fpr_px4_bridge.px4_protocol import (
     MAV_AUTOPILOT_INVALID,
+    MAV_CMD_SET_MESSAGE_INTERVAL,
     MAV_STATE_ACTIVE,
     MAV_TYPE_GCS,
     MAV_TYPE_ONBOARD_CONTROLLER,
     encode_set_attitude_target,
 )
+from fpr_px4_bridge.streams import StreamConfigurator, StreamRequest
 from fpr_px4_bridge.swarm_guard import SwarmGuard, SwarmGuardConfig, Verdict
 from fpr_px4_bridge.telemetry import TelemetryDecoder
 from fpr_px4_bridge.time_sync import SimulationBootClock
@@ -117,6 +120,9 @@ class BridgeConfig:
     offboard: OffboardConfig = OffboardConfig()
     #: the swarm guard (issue 12's emergency response): off here, on in the node (parameter ``swarm_guard``)
     guard: SwarmGuardConfig = SwarmGuardConfig(enabled=False)
+    #: the telemetry rates to ask PX4 for (fpr_px4_bridge.streams): none here, DEFAULT_MESSAGE_RATES in the node
+    #: (parameter ``message_rates``)
+    message_rates: tuple[StreamRequest, ...] = ()
 
     def __post_init__(self) -> None:
         if self.px4_boot_clock not in ("estimate", "ros_time"):
@@ -197,6 +203,8 @@ class Px4Bridge:
         self.link = link
         self.machine = OffboardStateMachine(config.offboard)
         self.guard = SwarmGuard(config.guard)
+        self.streams = StreamConfigurator(config.message_rates, config.offboard.command_retry_interval,
+                                          config.offboard.command_max_attempts)
         self.verdict: Verdict | None = None  #: the guard's latest (None: guard off)
         self.telemetry = TelemetryDecoder(SimulationBootClock() if config.px4_boot_clock == "ros_time" else None)
         self.boot_time = boot_time  # local time that our time_boot_ms counts from
@@ -425,19 +433,26 @@ class Px4Bridge:
         self._stream_slots(now, decision.stream)
         cfg = self.config
         for command in decision.commands:
-            self.link.send(self.link.mav.command_long_encode(
-                target_system=cfg.target_system, target_component=cfg.target_component,
-                command=command.command, confirmation=0,
-                param1=command.params[0], param2=command.params[1], param3=command.params[2],
-                param4=command.params[3], param5=command.params[4], param6=command.params[5],
-                param7=command.params[6]))
+            self._send_command(command)
             self._event("info", f"command.{command.label}", f"sent {command.label} (MAV_CMD {command.command})")
+        for command in self.streams.step(now, self.machine.connected(now)):
+            self._send_command(command)  # the stream configurator logs one line when done
+        self._pending_events.extend(self.streams.take_events())
         if now - self._last_heartbeat_sent >= cfg.heartbeat_period or now < self._last_heartbeat_sent:
             self._last_heartbeat_sent = now
             self.link.send(self.link.mav.heartbeat_encode(
                 type=MAV_TYPE_ONBOARD_CONTROLLER, autopilot=MAV_AUTOPILOT_INVALID, base_mode=0, custom_mode=0,
                 system_status=MAV_STATE_ACTIVE))
         return decision.events + self.take_events()
+
+    def _send_command(self, command: CommandRequest) -> None:
+        cfg = self.config
+        self.link.send(self.link.mav.command_long_encode(
+            target_system=cfg.target_system, target_component=cfg.target_component,
+            command=command.command, confirmation=0,
+            param1=command.params[0], param2=command.params[1], param3=command.params[2],
+            param4=command.params[3], param5=command.params[4], param6=command.params[5],
+            param7=command.params[6]))
 
     def _feed_guard_from_telemetry(self, now: float) -> None:
         """The envelope inputs of the swarm guard: PX4's local position (height, climb rate, horizontal position)
@@ -464,7 +479,10 @@ class Px4Bridge:
         if msg.get_srcComponent() == self.config.target_component:
             self.machine.on_frame(now)  # any frame from the autopilot proves it alive (PX4-silence rule)
         if kind == "COMMAND_ACK":
-            self.machine.on_command_ack(msg.command, msg.result, now)
+            if msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
+                self.streams.on_command_ack(msg.result, now)
+            else:
+                self.machine.on_command_ack(msg.command, msg.result, now)
             return None
         try:
             return self.telemetry.decode(msg, now)

@@ -34,6 +34,7 @@ from fpr_msgs.msg import AttitudeThrustSetpoint, ControllerStatus, InformationVe
 from fpr_px4_bridge.bridge import BridgeConfig, Px4Bridge
 from fpr_px4_bridge.link import MavlinkLink, load_signing_key
 from fpr_px4_bridge.offboard import LogEvent, OffboardConfig
+from fpr_px4_bridge.streams import DEFAULT_MESSAGE_RATES, parse_message_rates
 from fpr_px4_bridge.swarm_guard import SwarmGuardConfig
 from fpr_px4_bridge.telemetry import BatterySample, BodyVelocitySample, ImuSample
 
@@ -77,6 +78,10 @@ _PARAMETERS = {
     "command_max_attempts": Param(6, "attempts of ARM / OFFBOARD / LAND before giving up (KILL retries forever)",
                                   low=1, high=1000),
     "kill_flight_termination": (False, "KILL also sends DO_FLIGHTTERMINATION (PX4 then needs a reboot)"),
+    "message_rates": (list(DEFAULT_MESSAGE_RATES), "telemetry rates asked of PX4 once it is heard "
+                      "(MAV_CMD_SET_MESSAGE_INTERVAL), 'NAME=Hz'; 0 stops a stream, 'default' restores PX4's rate. "
+                      "Default: no ATTITUDE (unused), LOCAL_POSITION_NED at 50 Hz (PX4: 30)"),
+    "configure_streams": (True, "ask PX4 for message_rates; false: leave PX4's streams as they are"),
     "signing_key_file": ("", "MAVLink 2 signing secret (64 hex digits or 32 bytes); empty: signing off"),
     "signing_link_id": Param(0, "MAVLink 2 signing link id", high=255),
     "status_rate": Param(10.0, "[Hz] status publication rate", low=0.1, high=1000.0),
@@ -188,7 +193,8 @@ class Px4BridgeNode(Node):
                 peer_silence_deadline=float(p["peer_silence_deadline"]), max_height=float(p["max_height"]),
                 max_distance=float(p["max_distance"]),
                 max_climb_rate=float(p["max_climb_rate"]), max_tilt_deg=float(p["max_tilt_deg"]),
-                max_platform_tilt_deg=float(p["max_platform_tilt_deg"]), envelope_time=float(p["envelope_time"])))
+                max_platform_tilt_deg=float(p["max_platform_tilt_deg"]), envelope_time=float(p["envelope_time"])),
+            message_rates=parse_message_rates(p["message_rates"]) if p["configure_streams"] else ())
         url = p["connection_url"] or f"udp://127.0.0.1:{14540 + uav_id - 1}"
         key = load_signing_key(p["signing_key_file"]) if p["signing_key_file"] else None
         self.link = MavlinkLink(url, system_id=int(p["system_id"]) or target_system,

@@ -35,6 +35,7 @@ __all__ = [
     "MAV_CMD_COMPONENT_ARM_DISARM",
     "MAV_CMD_DO_FLIGHTTERMINATION",
     "MAV_CMD_DO_SET_MODE",
+    "MAV_CMD_SET_MESSAGE_INTERVAL",
     "MAV_COMP_ID_AUTOPILOT1",
     "MAV_COMP_ID_ONBOARD_COMPUTER",
     "MAV_MODE_FLAG_AUTO_ENABLED",
@@ -104,6 +105,8 @@ MAV_MODE_FLAG_SAFETY_ARMED = 128
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_DO_FLIGHTTERMINATION = 185
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+#: param1 = message id, param2 = interval [us] (-1: stop the stream, 0: the autopilot's default rate)
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
 #: COMPONENT_ARM_DISARM param2 that forces a disarm even in flight (PX4 and ArduPilot).
 FORCE_DISARM_MAGIC = 21196.0
 

@@ -406,3 +406,46 @@ def test_thrust_refusal_ratio_one_refuses_anything_above_f_max():
         link.close()
     with pytest.raises(ValueError, match="thrust_refusal_ratio"):
         BridgeConfig(thrust_refusal_ratio=0.9)
+
+
+def test_telemetry_rates_are_asked_of_px4_once_heard_one_at_a_time_acks_routed_to_them():
+    """message_rates (fpr_px4_bridge.streams): nothing before the first HEARTBEAT; then one SET_MESSAGE_INTERVAL
+    per entry, the next after PX4's ACK of 511; a refusal is the stream configurator's warning, not the state
+    machine's; nothing is repeated once answered."""
+    from fpr_px4_bridge.streams import parse_message_rates
+
+    link = MavlinkLink("udp://127.0.0.1:0", system_id=1, target_system=1)
+    config = BridgeConfig(uav_id=1, message_rates=parse_message_rates(["ATTITUDE=0", "LOCAL_POSITION_NED=50"]))
+    bridge = Px4Bridge(config, link)
+    peer = Peer(link.local_address)
+    try:
+        bridge.tick(0.0)
+        assert [m for m in peer.read() if m.get_type() == "COMMAND_LONG"] == []  # PX4 not heard yet
+        connect(bridge, peer, 0.02)
+        bridge.tick(0.02)
+        (first,) = [m for m in peer.read() if m.get_type() == "COMMAND_LONG"]
+        assert (first.command, first.param1, first.param2) == (p.MAV_CMD_SET_MESSAGE_INTERVAL, 30.0, -1.0)
+        assert (first.target_system, first.target_component) == (1, 1)
+        bridge.tick(0.04)
+        assert [m for m in peer.read() if m.get_type() == "COMMAND_LONG"] == []  # waits for the ACK
+        peer.send(peer.mav.command_ack_encode(command=p.MAV_CMD_SET_MESSAGE_INTERVAL, result=0))
+        bridge.poll(0.05, timeout=1.0)
+        bridge.tick(0.06)
+        (second,) = [m for m in peer.read() if m.get_type() == "COMMAND_LONG"]
+        assert (second.param1, second.param2) == (32.0, 20000.0)
+        peer.send(peer.mav.command_ack_encode(command=p.MAV_CMD_SET_MESSAGE_INTERVAL, result=2))  # DENIED
+        bridge.poll(0.07, timeout=1.0)
+        events = bridge.tick(0.08)
+        texts = [e.text for e in events]
+        assert any("PX4 did not take LOCAL_POSITION_NED 50 Hz (DENIED)" in t for t in texts), texts
+        assert any(t == "PX4 telemetry: ATTITUDE off" for t in texts), texts
+        assert not any("PX4 answered command 511" in t for t in texts), texts
+        assert bridge.streams.done
+        for t in (0.1, 0.3, 0.6, 1.0):  # nothing repeated once answered
+            peer.heartbeat(ARMED, POSCTL)
+            bridge.poll(t, timeout=1.0)
+            bridge.tick(t)
+        assert [m for m in peer.read() if m.get_type() == "COMMAND_LONG"] == []
+    finally:
+        link.close()
+        peer.sock.close()

@@ -413,3 +413,24 @@ def test_a_dead_simulator_is_reported_by_the_wall_clock_watchdog(graph):
     assert status.state == UavStatus.STATE_DISCONNECTED and status.link_age >= node.wall_silence_timeout
     assert node._wall_silent_since is not None
     assert reported < 3.0  # the watchdog's own bound is wall_silence_timeout + its 0.1 s period (generous: CI load)
+
+
+def test_message_rates_parameter_defaults_switch_and_refusal(free_port):
+    """message_rates (README "Telemetry rates"): the default list reaches the bridge core; configure_streams false
+    asks for nothing; a bad entry stops the node at start, naming the entry."""
+    from fpr_px4_bridge.streams import DEFAULT_MESSAGE_RATES, parse_message_rates
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    url = Parameter("connection_url", value=f"udp://127.0.0.1:{free_port}")
+    try:
+        node = Px4BridgeNode(context=context, parameter_overrides=[url])
+        assert node.bridge.config.message_rates == parse_message_rates(DEFAULT_MESSAGE_RATES)
+        node.destroy_node()
+        node = Px4BridgeNode(context=context, parameter_overrides=[url, Parameter("configure_streams", value=False)])
+        assert node.bridge.config.message_rates == () and node.bridge.streams.done
+        node.destroy_node()
+        with pytest.raises(ValueError, match="'HEARTBEAT=1'|HEARTBEAT"):
+            Px4BridgeNode(context=context, parameter_overrides=[url, Parameter("message_rates", value=["HEARTBEAT=1"])])
+    finally:
+        rclpy.shutdown(context=context)
