@@ -480,7 +480,8 @@ class Px4Bridge:
             self.machine.on_frame(now)  # any frame from the autopilot proves it alive (PX4-silence rule)
         if kind == "COMMAND_ACK":
             if msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
-                self.streams.on_command_ack(msg.result, now)
+                if msg.get_srcComponent() == self.config.target_component:  # the autopilot's streams, not a camera's
+                    self.streams.on_command_ack(msg.result, now)
             else:
                 self.machine.on_command_ack(msg.command, msg.result, now)
             return None

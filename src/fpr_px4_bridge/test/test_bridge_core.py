@@ -428,6 +428,12 @@ def test_telemetry_rates_are_asked_of_px4_once_heard_one_at_a_time_acks_routed_t
         assert (first.target_system, first.target_component) == (1, 1)
         bridge.tick(0.04)
         assert [m for m in peer.read() if m.get_type() == "COMMAND_LONG"] == []  # waits for the ACK
+        camera = mavlink.MAVLink(None, srcSystem=1, srcComponent=100)  # another component's ACK is not PX4's
+        peer.sock.sendto(camera.command_ack_encode(command=p.MAV_CMD_SET_MESSAGE_INTERVAL, result=0).pack(camera),
+                         peer.address)
+        bridge.poll(0.045, timeout=1.0)
+        bridge.tick(0.046)
+        assert [m for m in peer.read() if m.get_type() == "COMMAND_LONG"] == []
         peer.send(peer.mav.command_ack_encode(command=p.MAV_CMD_SET_MESSAGE_INTERVAL, result=0))
         bridge.poll(0.05, timeout=1.0)
         bridge.tick(0.06)
