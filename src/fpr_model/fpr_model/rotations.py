@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from fpr_model._math import skew_batch
+from fpr_model._math import cross3, skew_batch
 from fpr_model._validation import as_angles, as_array, as_scalar, as_trailing
 
 __all__ = [
@@ -179,12 +179,35 @@ def quat_rotate(q, v) -> np.ndarray:
     """Rotate ``v`` by the unit quaternion ``q`` (A.55): ``[0; z] = q ∘ [0; v] ∘ q̄``, i.e. ``R(q) @ v``.
 
     Uses ``z = v + 2 q0 (u × v) + 2 u × (u × v)`` with ``u = q1:3`` (no normalisation is applied).
+    One q and one v (the estimators' and bridges' per-message case) are rotated on plain floats with the same
+    operations in the same order as the array form, so the result is bit-identical (``test_rotations``), at
+    ~1/5 of the cost (issue 15).
     """
+    single = _single_rotation(q, v)
+    if single is not None:
+        return np.array(single)
     q = as_trailing("q", q, (4,))
     v = as_trailing("v", v, (3,))
     u = q[..., 1:]
     t = 2.0 * np.cross(u, v)
     return v + q[..., :1] * t + np.cross(u, t)
+
+
+def _single_rotation(q, v) -> tuple[float, float, float] | None:
+    """:func:`quat_rotate` of one float64 (4,) array ``q`` and one (3,) array ``v``, both finite, as plain floats;
+    None for anything else (the array path then converts, checks and raises)."""
+    if type(q) is not np.ndarray or type(v) is not np.ndarray or q.shape != (4,) or v.shape != (3,) \
+            or q.dtype != np.float64 or v.dtype != np.float64:
+        return None
+    w, x, y, z = q.tolist()
+    vector = v.tolist()
+    if not all(map(math.isfinite, (w, x, y, z, *vector))):
+        return None
+    u = (x, y, z)
+    cx, cy, cz = cross3(u, vector)
+    t = (2.0 * cx, 2.0 * cy, 2.0 * cz)  # np.cross's component order and operations (a1 b2 − a2 b1, …)
+    ux, uy, uz = cross3(u, t)
+    return vector[0] + w * t[0] + ux, vector[1] + w * t[1] + uy, vector[2] + w * t[2] + uz
 
 
 def rotation_entries(w, x, y, z) -> tuple:

@@ -282,3 +282,25 @@ def test_quat_tilt_is_the_angle_of_body_z_from_the_vertical_scalar_and_batched()
     assert math.isclose(quat_tilt(euler_zyx_to_quat(0.3, 0.0, 1.2)), 0.3, abs_tol=1e-12)  # yaw does not tilt
     batch = np.array([euler_zyx_to_quat(0.0, 0.5, 0.0), euler_zyx_to_quat(math.pi, 0.0, 0.0)])
     np.testing.assert_allclose(quat_tilt(batch), [0.5, math.pi], atol=1e-7)
+
+
+def test_quat_rotate_single_vector_is_bit_identical_to_the_array_form():
+    """The plain-float path of one q and one v (issue 15) gives exactly the batched numpy form's bits, also for
+    non-unit quaternions and large values; inputs it does not take (lists, float32, NaN) go the array way."""
+    rng = np.random.default_rng(7)
+    qs = np.concatenate([rng.normal(size=(500, 4)), 1e6 * rng.normal(size=(50, 4))])
+    vs = np.concatenate([rng.normal(size=(500, 3)), 1e-9 * rng.normal(size=(50, 3))])
+    batched = rt.quat_rotate(qs, vs)  # the array form (not the single path: 2-D)
+    for k in range(len(qs)):
+        single = rt.quat_rotate(qs[k], vs[k])
+        assert single.shape == (3,) and single.dtype == np.float64
+        assert np.array_equal(single, batched[k]), k
+    assert np.array_equal(rt.quat_rotate(list(qs[0]), list(vs[0])), batched[0])  # a list: the array path
+    assert np.allclose(rt.quat_rotate(qs[0].astype(np.float32), vs[0]), batched[0], atol=1e-5)
+    for bad in (np.array([np.nan, 0.0, 0.0, 1.0]), np.array([1.0, 0.0, np.inf, 0.0])):
+        with pytest.raises(ValueError, match="q: contains NaN or inf"):
+            rt.quat_rotate(bad, vs[0])
+    with pytest.raises(ValueError, match="v: contains NaN or inf"):
+        rt.quat_rotate(qs[0], np.array([0.0, np.nan, 1.0]))
+    with pytest.raises(ValueError, match="v: expected shape"):
+        rt.quat_rotate(qs[0], np.zeros(4))
