@@ -26,7 +26,8 @@ Definitions (the thesis's symbols, ASCII names):
   that were emulated from the motion capture (§4.4.2);
 - safety figures: ``max_abs_roll_deg`` / ``max_abs_pitch_deg`` (whole airborne flight), ``max_height_m``,
   ``max_excursion_m`` (horizontal, from the start), ``ground_contacts`` (UAVs touching the ground while the
-  controllers fly, unless the operator just commanded a descent: that is landing), ``nonfinite_samples``,
+  controllers fly, once the robot has taken off, unless the operator just commanded a descent: that is landing;
+  touches before the take-off clearance are a take-off hop: ``takeoff_touchdowns``, not a check), ``nonfinite_samples``,
   ``swarm_emergencies`` (entries of the swarm into the bridges' emergency response: Hold, then land; why in
   metrics.json ``emergencies``).
 """
@@ -47,6 +48,10 @@ CONTACT_DEMAND = 0.1
 #: Table 4.8's successful detection: errors below 10 cm and 10° (l.7114-7121)
 DETECTION_POSITION_LIMIT = 0.10
 DETECTION_ANGLE_LIMIT = math.radians(10.0)
+#: [m] the robot has taken off once every UAV's feet have been this high together: a touch-down before it is the
+#: take-off's (the structure lifting off and settling back, a hop, before the operator's climb), reported as
+#: ``takeoff_touchdowns`` and not as a ground contact; a hop peaks at a few cm (table_3_7 Task 1 Case 2: 4.7 cm)
+TAKEOFF_CLEARANCE = 0.15
 #: [s] a touch-down this soon after a commanded descent is a landing, not a ground contact
 GROUND_DESCENT_GRACE = 2.0
 #: [s] after a payload attaches, the observers' estimate counts as converged (FOWO K_O = 2/s: e^-6 by 3 s)
@@ -85,7 +90,9 @@ METRIC_INFO: dict[str, MetricInfo] = {
     "max_abs_pitch_deg": MetricInfo("deg", "largest |platform pitch| while airborne", 1),
     "max_height_m": MetricInfo("m", "highest platform position", 2),
     "max_excursion_m": MetricInfo("m", "largest horizontal distance from the start", 2),
-    "ground_contacts": MetricInfo("", "UAV ground touches while the controllers fly (no LAND)", 0),
+    "ground_contacts": MetricInfo("", "UAV ground touches while the controllers fly (no LAND), after take-off", 0),
+    "takeoff_touchdowns": MetricInfo("", "UAV ground touches while the controllers fly, airborne but not yet "
+                                         "15 cm up (a take-off hop; not a check)", 0),
     "nonfinite_samples": MetricInfo("", "ground-truth samples with NaN/inf", 0),
     "swarm_emergencies": MetricInfo("", "entries of the swarm into its emergency response (any UAV's bridge)", 0),
     "tracking_time_s": MetricInfo("s", "time inside the tracking window", 1),
@@ -410,7 +417,7 @@ def recovery_time(record: FlightRecord, link_restored: float, hold_for: float = 
 def safety_metrics(record: FlightRecord) -> dict[str, float]:
     """Flip / fly-away / ground-touch figures of the whole flight (see the module doc)."""
     truth = record.truth
-    out: dict[str, float] = {"nonfinite_samples": 0.0, "ground_contacts": 0.0}
+    out: dict[str, float] = {"nonfinite_samples": 0.0, "ground_contacts": 0.0, "takeoff_touchdowns": 0.0}
     if len(truth.t) == 0:
         return out
     finite = np.all(np.isfinite(truth.position), axis=1) & np.all(np.isfinite(truth.rpy), axis=1)
@@ -423,13 +430,19 @@ def safety_metrics(record: FlightRecord) -> dict[str, float]:
     out["max_height_m"] = float(np.nanmax(truth.position[:, 2]))
     out["max_excursion_m"] = float(np.nanmax(np.linalg.norm(truth.position[:, :2] - truth.position[0, :2],
                                                             axis=1)))
-    # a UAV's feet on the ground while the controllers fly (OFFBOARD + FLY), after the robot was airborne once,
-    # unless the operator was bringing it down (a descent commanded in the last GROUND_DESCENT_GRACE s): landing
+    # a UAV's feet on the ground while the controllers fly (OFFBOARD + FLY), after the robot has taken off
+    # (TAKEOFF_CLEARANCE), unless the operator was bringing it down (a descent commanded in the last
+    # GROUND_DESCENT_GRACE s): landing. Airborne before it (feet above AIRBORNE_CLEARANCE) and back on the
+    # ground: a take-off hop, counted apart (takeoff_touchdowns)
     flying = hold(truth.t, record.command.t, record.command.mode) == record.names.fly_mode
     for u in record.uavs:
         flying &= hold(truth.t, u.status_t, u.bridge_state) == record.names.offboard_state
+    feet = truth.uav_positions[:, :, 2] - record.landing_gear_height
     was_airborne = np.cumsum(airborne) > 0
-    touching = np.any(truth.uav_positions[:, :, 2] - record.landing_gear_height < 0.005, axis=1)
+    taken_off = np.cumsum(np.all(feet > TAKEOFF_CLEARANCE, axis=1)) > 0
+    touching = np.any(feet < 0.005, axis=1)
+    hops = np.diff(np.concatenate([[0], (touching & flying & was_airborne & ~taken_off).astype(int)])) == 1
+    out["takeoff_touchdowns"] = float(np.count_nonzero(hops))
     c = record.command
     descending = np.zeros(len(truth.t), dtype=bool)
     if len(c.t):
@@ -437,7 +450,7 @@ def safety_metrics(record: FlightRecord) -> dict[str, float]:
         if len(down):
             k = np.searchsorted(down, truth.t, side="right") - 1
             descending = (k >= 0) & (truth.t - down[np.clip(k, 0, None)] <= GROUND_DESCENT_GRACE)
-    events = np.diff(np.concatenate([[0], (touching & flying & was_airborne & ~descending).astype(int)])) == 1
+    events = np.diff(np.concatenate([[0], (touching & flying & taken_off & ~descending).astype(int)])) == 1
     out["ground_contacts"] = float(np.count_nonzero(events))
     out["swarm_emergencies"] = float(swarm_emergencies(record))
     return out

@@ -85,6 +85,23 @@ def test_a_touch_down_while_the_controllers_fly_is_a_ground_contact():
     assert fm.safety_metrics(record)["nonfinite_samples"] == 1.0
 
 
+def test_a_take_off_hop_is_not_a_ground_contact_but_is_reported():
+    """FLY and OFFBOARD from 3 s, the climb at 6 s: the structure lifting 4 cm off at 4 s and settling back at
+    4.5 s (a hop, before it was ever 15 cm up) is a take-off touch-down; the same after the climb is a contact."""
+    record = synthetic_record()
+    t = record.truth.t
+    feet = record.truth.uav_positions[:, :, 2]
+    hop = (t > 4.0) & (t < 4.5)
+    feet[hop] += 0.04  # every UAV's feet 4 cm up (airborne: above AIRBORNE_CLEARANCE), then back on the ground
+    m = fm.safety_metrics(record)
+    assert m["takeoff_touchdowns"] == 1.0 and m["ground_contacts"] == 0.0
+    assert fm.TAKEOFF_CLEARANCE > 0.04 + 1e-9  # the hop stays below the take-off clearance
+    dip = (t > 12.0) & (t < 12.5)  # after the climb (0.3 m/s from 6 s: ~1.2 m up): the feet down again
+    feet[dip, 1] = record.landing_gear_height
+    m = fm.safety_metrics(record)
+    assert m["takeoff_touchdowns"] == 1.0 and m["ground_contacts"] == 1.0
+
+
 def test_swarm_emergencies_count_the_swarm_entering_its_emergency_response():
     record = synthetic_record()
     assert fm.safety_metrics(record)["swarm_emergencies"] == 0.0
