@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from fpr_experiments.catalog import Experiment
-from fpr_experiments.metrics import METRIC_INFO, metric_info
+from fpr_experiments.metrics import METRIC_INFO, TAKEOFF_CLEARANCE, metric_info
 from fpr_experiments.thesis import compare
 
 
@@ -143,7 +143,8 @@ def write_experiment_report(experiment: Experiment, result, root: str, *, quick:
             "label": labels[variant.id], "thesis_row": variant.thesis_row, "metrics": rows,
             "passed": vr.passed, "completed": vr.completed, "sim_time_s": vr.sim_time, "wall_time_s": vr.wall_time,
             "lockstep_timeouts": vr.lockstep_timeouts, "report_dir": os.path.relpath(vr.report_dir, root),
-            "failed_checks": [c.text() for c in vr.checks if not c.passed]}
+            "failed_checks": [c.text() for c in vr.checks if not c.passed],
+            "takeoff_touchdowns": vr.metrics.get("takeoff_touchdowns", 0.0)}
     summary = {
         "experiment": experiment.id, "title": experiment.title, "thesis": experiment.thesis,
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"), "commit": git_commit(),
@@ -356,6 +357,11 @@ def results_markdown(summaries: list[dict[str, Any]], experiments: dict[str, Exp
         if failed:
             legend += " ⚠ = a flight check failed: " + "; ".join(
                 f"{v['label']}: {', '.join(v['failed_checks'])}" for v in failed)
+        hops = [v for v in variants if (v.get("takeoff_touchdowns") or 0.0) > 0.0]
+        if hops:  # reported, not a check (fpr_experiments.metrics.TAKEOFF_CLEARANCE)
+            legend += (" Take-off hops (a UAV's feet back on the ground before the robot first climbed "
+                       f"{100 * TAKEOFF_CLEARANCE:.0f} cm; not a ground contact): " + "; ".join(
+                           f"{v['label']}: {v['takeoff_touchdowns']:.0f}" for v in hops) + ".")
         out += ["", legend, ""]
         for o in summary["orderings"]:
             out.append(f"- {o['label']}: thesis {o['thesis']}; ours {o['ours']} — "

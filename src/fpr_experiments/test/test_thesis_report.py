@@ -78,6 +78,24 @@ def test_experiment_report_json_results_markdown_and_claims(tmp_path):
     assert "PD ⚠" in text and "do not edit by hand" in text
     table = report.format_experiment_table(experiment, summary)
     assert "thesis 4.60" in table and "CHECKS FAILED" in table
+    assert "Take-off hops" not in text
+
+
+def test_take_off_hops_are_stated_beside_the_table(tmp_path):
+    """A flight whose structure hopped at take-off (takeoff_touchdowns > 0, not a check) says so in results.md."""
+    experiment = experiment_from_dict({
+        "id": "table_3_2", "title": "hover", "thesis": "Table 3.2", "scenario": "ground_start",
+        "script": "integration_flight", "duration": 10.0,
+        "variants": [{"id": "impedance", "label": "Impedance", "thesis_row": "Impedance"},
+                     {"id": "pd", "label": "PD", "thesis_row": "PD"}],
+        "metrics": [{"metric": "roll_rmse_deg", "table": "3.2", "column": "RMSE phi_p (roll)", "label": "roll"}]})
+    result = _result(tmp_path, experiment, {"impedance": {"roll_rmse_deg": 4.0, "takeoff_touchdowns": 2.0},
+                                            "pd": {"roll_rmse_deg": 9.0, "takeoff_touchdowns": 0.0}})
+    summary = report.write_experiment_report(experiment, result, str(tmp_path), plots=False)
+    assert json.loads((tmp_path / "metrics.json").read_text())["variants"]["impedance"]["takeoff_touchdowns"] == 2
+    text = report.results_markdown([summary], {"table_3_2": experiment}, "ros2 run fpr_experiments run all")
+    assert "Take-off hops (a UAV's feet back on the ground before the robot first climbed 15 cm" in text
+    assert "Impedance: 2." in text and "PD: 0" not in text
 
 
 def test_the_cameras_are_stated_without_plots_too(tmp_path):
