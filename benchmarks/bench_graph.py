@@ -30,6 +30,7 @@ import time
 from fpr_experiments.graph import GraphOptions, describe_graph
 from fpr_experiments.inprocess import InProcessGraph
 from fpr_experiments.recording import recorded_topics
+from fpr_model.opencv_dispatch import opencv_dispatch as dispatch_context
 
 #: case -> (n, scenario, script, cameras)
 CASES = {
@@ -42,7 +43,8 @@ CASES = {
 #: baseline (main before issue 15); the deterministic runner drains with rclpy's executor or the SweepExecutor
 #: (fpr_experiments.sweep_executor; "sweep-copy": one conversion per subscription, as rclpy; "sweep-dds": every
 #: message through DDS instead of fpr_experiments.intra_process's in-process delivery); "hardware" compares
-#: the realism profiles on the default runner (issue 11: hardware <= 20 % cost)
+#: the realism profiles on the default runner (issue 11: hardware <= 20 % cost); optionally node parameters
+#: {executable: {name: value}} (None: none) and OpenCV's dispatch (fpr_model.opencv_dispatch; default native)
 LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", "rclpy"),
           "threaded, lean nodes": (False, True, 250.0, "ideal", "rclpy"),
           "threaded, /clock 100 Hz": (False, False, 100.0, "ideal", "rclpy"),
@@ -61,7 +63,11 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
                                                           {"aruco_detector": {"roi_margin": 0.0}}),
           # the default with PX4's own telemetry rates (before the bridges asked for theirs: ATTITUDE 100 Hz on)
           "default, PX4's telemetry rates (configure_streams false)": (True, True, 100.0, "ideal", "sweep",
-                                                                       {"px4_bridge": {"configure_streams": False}})}
+                                                                       {"px4_bridge": {"configure_streams": False}}),
+          # the default with OpenCV's baseline code, as fpr_experiments' runs fly it (fpr_model.opencv_dispatch;
+          # every lever above lets OpenCV pick the CPU's SIMD code)
+          "default, OpenCV baseline dispatch (the experiments')": (True, True, 100.0, "ideal", "sweep", None,
+                                                                     "baseline")}
 
 
 def _cpu() -> float:
@@ -108,7 +114,8 @@ def overlap_bound(period_costs: list[tuple[float, float, float]], control_rate: 
 
 def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
              realism: str = "ideal", executor: str = "sweep", simulator_through_dds: bool = False,
-             measure_periods: bool = False, node_parameters: dict | None = None) -> dict:
+             measure_periods: bool = False, node_parameters: dict | None = None,
+             opencv_dispatch: str = "native") -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -119,9 +126,10 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
                            parameters={"simulator": {"clock_rate": clock_rate}, **model, **(node_parameters or {})},
                            realism=realism)
     load_before = os.getloadavg()[0]
-    with InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
-                        executor=executor if deterministic else None, simulator_through_dds=simulator_through_dds,
-                        measure_periods=measure_periods) as graph:
+    with dispatch_context(opencv_dispatch), \
+            InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
+                           executor=executor if deterministic else None, simulator_through_dds=simulator_through_dds,
+                           measure_periods=measure_periods) as graph:
         graph.wait_for_discovery()
         entities = _entities(graph)
         wall, cpu = time.monotonic(), _cpu()
@@ -155,9 +163,10 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}", flush=True)
     for case in args.cases.split(","):
         baseline = None
-        for name, (deterministic, lean, clock_rate, realism, executor, *node_parameters) in levers:
+        for name, (deterministic, lean, clock_rate, realism, executor, *extra) in levers:
             r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor,
-                         node_parameters=node_parameters[0] if node_parameters else None)
+                         node_parameters=extra[0] if extra else None,
+                         opencv_dispatch=extra[1] if len(extra) > 1 else "native")
             baseline = baseline or r
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 from fpr_model.calibration import CameraModel
 from fpr_model.node_parameters import NodeParameters, Param, throttle
+from fpr_model.opencv_dispatch import ENVIRONMENT_VARIABLE, apply_opencv_dispatch
 from fpr_model.rotations import rotmat_to_quat
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -69,6 +70,9 @@ class ArucoDetectorNode(Node):
             ambiguity_threshold=float(p["ambiguity_threshold"]), roi_margin=float(p["roi_margin"]),
             roi_border=int(p["roi_border"]))
         self._detector = ArucoPoseDetector(self._config)
+        if apply_opencv_dispatch() != "native":  # simulation: detections the same on every CPU
+            self.get_logger().info(f"OpenCV dispatch: baseline ({ENVIRONMENT_VARIABLE}): detections do not depend "
+                                   "on the CPU's SIMD features")
         self._debug = bool(p["publish_debug_image"])
         self._log_interval = float(p["log_interval"])
         self._camera: CameraModel | None = None

@@ -58,6 +58,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--live-view", type=int, nargs="?", const=8765, default=None, metavar="PORT",
                         help="serve each flight live to the Foxglove app over WebSocket on 127.0.0.1:PORT (default "
                              "8765; 0: any free port), the report MCAP's topics (fpr_experiments.live_view)")
+    parser.add_argument("--opencv-dispatch", choices=("baseline", "native"), default="baseline",
+                        help="OpenCV's SIMD code (fpr_model.opencv_dispatch): 'baseline' (default) renders and "
+                             "detects the same on every CPU, so an image flight is the same flight on every machine; "
+                             "'native' lets OpenCV pick the CPU's fastest code, as on the robot")
     parser.add_argument("--jobs", type=int, default=1,
                         help="with 'all': experiments flown in parallel, each in its own isolated process (its own "
                              "network namespace and ROS domain; 2 cores: 2); default 1")
@@ -95,6 +99,8 @@ def _experiment_flags(args) -> list[str]:
         tokens += ["--param", parameter]
     if args.processes:
         tokens.append("--processes")
+    if args.opencv_dispatch != "baseline":
+        tokens += ["--opencv-dispatch", args.opencv_dispatch]
     return tokens
 
 
@@ -254,7 +260,8 @@ def run_main(argv: list[str] | None = None) -> int:
                                     processes=args.processes, variants=args.variant, output_root=output_root,
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
                                     realism=args.realism, live_view_port=args.live_view,
-                                    scenario_overrides=overrides, parameter_overrides=parameters)
+                                    scenario_overrides=overrides, parameter_overrides=parameters,
+                                    opencv_dispatch=args.opencv_dispatch)
             if not result.passed:
                 status = 1
                 failed.append(name)

@@ -22,6 +22,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from fpr_model.opencv_dispatch import opencv_dispatch as dispatch_context
+
 from fpr_experiments.catalog import Experiment, Variant, load_experiment
 from fpr_experiments.graph import GraphOptions, describe_graph, write_graph_file
 from fpr_experiments.resources import SCENARIOS, resolve_file_parameters
@@ -180,11 +182,14 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
                 real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
                 scenario_overrides: Mapping[str, Any] | None = None,
                 live_view_port: int | None = None,
-                parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> VariantResult:
+                parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                opencv_dispatch: str = "baseline") -> VariantResult:
     """Fly one variant and write its report folder (see the module doc); ``realism`` None: the experiment's
     profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`);
     ``parameter_overrides`` ``{executable: {parameter: value}}`` laid over the experiment's and the variant's node
-    parameters (every node of that executable; graph.json keeps what each node got)."""
+    parameters (every node of that executable; graph.json keeps what each node got); ``opencv_dispatch``
+    (fpr_model.opencv_dispatch) ``baseline``: the rendered images and the detections do not depend on the CPU
+    (the flight is the same on every x86_64 machine), ``native``: OpenCV's own SIMD choice, as on the robot."""
     from fpr_experiments import report
     from fpr_experiments.metrics import compute_metrics
     from fpr_experiments.recording import flight_record, recorded_topics, write_mcap
@@ -213,7 +218,8 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
              f"{' + overrides' if scenario_overrides else ''}"
              f"{' + node parameters ' + _parameters_text(parameter_overrides) if parameter_overrides else ''}, "
              f"seed {scenario.seed}, {duration:.0f} s simulated"
-             f"{' (quick)' if quick else ''}, {'processes' if processes else 'one process'} -> {output_dir}")
+             f"{' (quick)' if quick else ''}{', OpenCV ' + opencv_dispatch if cameras == 'images' else ''}, "
+             f"{'processes' if processes else 'one process'} -> {output_dir}")
     wall_start = time.monotonic()
     live_view = None
     if live_view_port is not None:
@@ -223,13 +229,14 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
         _say(f"[{label}] live view: Foxglove WebSocket on {live_view.url()} ({len(live_view.channels)} topics, the "
              f"report MCAP's; layout config/viz/fpr_foxglove_layout.json)")
     try:
-        if processes:
-            from fpr_experiments.processes import run_processes
+        with dispatch_context(opencv_dispatch):  # this process and the ones it starts
+            if processes:
+                from fpr_experiments.processes import run_processes
 
-            outcome = run_processes(specs, topics, duration, output_dir=output_dir,
-                                    real_time_factor=real_time_factor, label=label, log=log, live_view=live_view)
-        else:
-            outcome = _run_in_process(specs, topics, duration, label, log, live_view)
+                outcome = run_processes(specs, topics, duration, output_dir=output_dir,
+                                        real_time_factor=real_time_factor, label=label, log=log, live_view=live_view)
+            else:
+                outcome = _run_in_process(specs, topics, duration, label, log, live_view)
     finally:
         if live_view is not None:
             live_view.stop()
@@ -256,7 +263,7 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     mcap = write_mcap(recording, os.path.join(output_dir, "flight.mcap"), metadata={
         "experiment": experiment.id, "variant": variant.id, "scenario": resolved["scenario"],
         "script": resolved["script"], "mode": resolved["mode"], "cameras": cameras, "seed": str(scenario.seed),
-        "realism": scenario.realism})
+        "realism": scenario.realism, "opencv_dispatch": opencv_dispatch})
     result = VariantResult(variant.id, metrics, checks, output_dir, record.sim_time, flight_wall, lockstep_timeouts,
                            completed, errors, record if plots else None)
     report.write_variant_json(result, record, os.path.join(output_dir, "metrics.json"), scenario)
@@ -315,7 +322,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
                    real_time_factor: float = 0.5, plots: bool = True, log: bool = True, realism: str | None = None,
                    scenario_overrides: Mapping[str, Any] | None = None,
                    live_view_port: int | None = None,
-                   parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> ExperimentResult:
+                   parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                   opencv_dispatch: str = "baseline") -> ExperimentResult:
     """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``.
 
     ``realism``: a realism profile (fpr_sim.scenario.realism_profiles) instead of the experiment's (catalog key
@@ -324,7 +332,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
     scenario is each variant's ``scenario.yaml``, the file the simulator and the info link read. ``live_view_port``:
     serve each flight to the Foxglove app on ws://127.0.0.1:<port> while it runs (fpr_experiments.live_view; 0: an
     ephemeral port, printed). ``parameter_overrides``: node parameters of every variant, ``{executable: {name:
-    value}}`` (ablations of the onboard software; a name no node of the executable declares stops the run)."""
+    value}}`` (ablations of the onboard software; a name no node of the executable declares stops the run).
+    ``opencv_dispatch``: see :func:`run_variant` (default ``baseline``: the same flight on every CPU)."""
     from fpr_experiments import report
     from fpr_experiments.catalog import check_realism
 
@@ -340,7 +349,7 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
             experiment, variant, os.path.join(root, variant.id), seed=seed, quick=quick, cameras=cameras,
             processes=processes, real_time_factor=real_time_factor, plots=plots, log=log, realism=realism,
             scenario_overrides=scenario_overrides, live_view_port=live_view_port,
-            parameter_overrides=parameter_overrides)
+            parameter_overrides=parameter_overrides, opencv_dispatch=opencv_dispatch)
     result = ExperimentResult(experiment.id, results, root)
     result.summary = report.write_experiment_report(experiment, result, root, quick=quick, seed=seed,
                                                     processes=processes, plots=plots)

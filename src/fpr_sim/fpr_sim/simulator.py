@@ -25,6 +25,7 @@ import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
 from fpr_model.node_parameters import NodeParameters
+from fpr_model.opencv_dispatch import ENVIRONMENT_VARIABLE, apply_opencv_dispatch
 from fpr_model.robot_description import robot_description
 from fpr_px4_bridge.link import load_signing_key
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, TransformStamped, Vector3
@@ -180,6 +181,9 @@ class SimulatorNode(Node):
             f"real_time_factor {self.real_time_factor}, lockstep {options.lockstep} (watchdog "
             f"{options.lockstep_timeout:g} s: {options.lockstep_on_timeout})")
         self.get_logger().info(f"plant kernel: {kernel_summary(self.sim.plant.kernel)}")
+        if apply_opencv_dispatch() != "native":  # rendered images: the same on every CPU
+            self.get_logger().info(f"OpenCV dispatch: baseline ({ENVIRONMENT_VARIABLE}): rendered images do not "
+                                   "depend on the CPU's SIMD features")
 
     # ------------------------------------------------------------------------------------------------
     def run(self) -> None:
