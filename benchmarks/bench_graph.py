@@ -67,7 +67,10 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # the default with OpenCV's baseline code, as fpr_experiments' runs fly it (fpr_model.opencv_dispatch;
           # every lever above lets OpenCV pick the CPU's SIMD code)
           "default, OpenCV baseline dispatch (the experiments')": (True, True, 100.0, "ideal", "sweep", None,
-                                                                     "baseline")}
+                                                                     "baseline"),
+          # the default with the MessageInfo callbacks (the controllers' zeta) through DDS, as before the router
+          # numbered them itself (fpr_experiments.intra_process)
+          "default, MessageInfo topics through DDS": (True, True, 100.0, "ideal", "sweep-info-dds")}
 
 
 def _cpu() -> float:

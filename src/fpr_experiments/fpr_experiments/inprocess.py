@@ -62,7 +62,9 @@ class InProcessGraph:
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
                  real_time_factor: float | None = None, verify_delivery: bool = False,
                  simulator_through_dds: bool = False, measure_periods: bool = False) -> None:
-        """``executor``: "sweep" (in-process delivery), "sweep-dds" (the sweep with every message through DDS),
+        """``executor``: "sweep" (in-process delivery), "sweep-info-dds" (in-process delivery but for the callbacks
+        that take MessageInfo, through DDS: before fpr_experiments.intra_process numbered them itself), "sweep-dds"
+        (the sweep with every message through DDS),
         "sweep-copy" (through DDS, and converting each message once per subscription, as rclpy does, instead of once
         per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
         sweep for lean nodes, else rclpy); the
@@ -78,8 +80,9 @@ class InProcessGraph:
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
-        if executor not in ("sweep", "sweep-dds", "sweep-copy", "rclpy"):
-            raise ValueError(f"executor must be 'sweep', 'sweep-dds', 'sweep-copy' or 'rclpy', got {executor!r}")
+        if executor not in ("sweep", "sweep-info-dds", "sweep-dds", "sweep-copy", "rclpy"):
+            raise ValueError("executor must be 'sweep', 'sweep-info-dds', 'sweep-dds', 'sweep-copy' or 'rclpy', got "
+                             f"{executor!r}")
         if executor != "rclpy" and not deterministic:
             raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
@@ -128,12 +131,14 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        sweep = self.executor_kind in ("sweep", "sweep-dds", "sweep-copy")
+        sweep = self.executor_kind in ("sweep", "sweep-info-dds", "sweep-dds", "sweep-copy")
         self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view,
                                  spin=not sweep)
         if sweep:
             self._sweep = SweepExecutor(share_messages=self.executor_kind != "sweep-copy",
-                                        intra_process=self.executor_kind == "sweep", verify=self.verify_delivery)
+                                        intra_process=self.executor_kind in ("sweep", "sweep-info-dds"),
+                                        verify=self.verify_delivery,
+                                        route_message_info=self.executor_kind != "sweep-info-dds")
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)

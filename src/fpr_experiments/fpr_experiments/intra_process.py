@@ -11,10 +11,16 @@ each message to C and CDR at the publisher (30-120 µs in the graph) and back to
 What it does (:class:`IntraProcessRouter`, driven by :class:`fpr_experiments.sweep_executor.SweepExecutor`):
 
 - a topic is *routed* when every endpoint of it inside the graph allows it: it has at least one publisher in the
-  graph and one subscription of a node the sweep serves; every such endpoint is VOLATILE (a TRANSIENT_LOCAL
-  publisher's late-joiner replay stays with DDS: /tf_static, /robot_description); and no served subscription asks
-  for ``MessageInfo`` (the controllers' /fpr/info callbacks tell publishers apart by DDS's publication sequence
-  numbers, which only DDS can give);
+  graph and one subscription of a node the sweep serves; and every such endpoint is VOLATILE (a TRANSIENT_LOCAL
+  publisher's late-joiner replay stays with DDS: /tf_static, /robot_description);
+- a subscription whose callback takes ``MessageInfo`` (the controllers' /fpr/info: they tell publishers apart by
+  the publication sequence number, fpr_control.information) gets with each routed message the dict rclpy's take
+  gives: ``publication_sequence_number`` counted per publisher from 1, one per publish, as Fast DDS's writer counts
+  (checked: tests/test_intra_process.py; the routed and the DDS flights are bit-identical, tests/test_determinism.py),
+  ``source_timestamp`` = ``received_timestamp`` = the wall clock at the publish [ns], ``reception_sequence_number``
+  None (Fast DDS gives none). The count starts when the router first routes the publisher: a publisher that had
+  published through DDS before (none in the graph: /fpr/info is published from the controllers' timers, which run
+  only once the sweep does) would number from 1 again, which the controllers read as a restarted publisher;
 - a routed publisher's ``publish`` appends the message object itself to the queue of every served subscription
   whose QoS is compatible with it (``rclpy.qos.qos_check_compatible``, as DDS matching) — no serialization, no
   copy, like rclcpp's intra-process publish of a ``unique_ptr``: the publisher hands the message over and must not
@@ -57,6 +63,7 @@ from __future__ import annotations
 import array
 import importlib
 import math
+import time
 from collections import deque
 from collections.abc import Callable, Iterable
 
@@ -89,11 +96,13 @@ class Route:
     """One served subscription of a routed topic: its queue of messages and how many graph publishers DDS should
     match it with (more means one from outside)."""
 
-    __slots__ = ("subscription", "topic", "queue", "graph_publishers", "poll_dds", "dds")
+    __slots__ = ("subscription", "topic", "queue", "graph_publishers", "poll_dds", "dds", "with_info")
 
     def __init__(self, subscription: Subscription, topic: RoutedTopic) -> None:
         self.subscription = subscription
         self.topic = topic
+        #: the callback takes (message, MessageInfo): :meth:`take` returns such pairs
+        self.with_info = subscription._callback_type is not Subscription.CallbackType.MessageOnly
         qos = subscription.qos_profile
         #: message objects, or CDR bytes (published as bytes); (object, its copy) pairs when the router verifies
         self.queue: deque = deque(maxlen=None if qos.history == HistoryPolicy.KEEP_ALL else max(1, qos.depth))
@@ -106,29 +115,32 @@ class Route:
 
     def take(self):
         """The next message for this subscription (a message object, or CDR bytes when it came through DDS or was
-        published as bytes), or None (see the module doc for the order)."""
+        published as bytes), or None (see the module doc for the order); with :attr:`with_info` a (message,
+        MessageInfo) pair."""
         handle = self.subscription.handle
         if self.topic.routed:
             if self.poll_dds:
                 taken = handle.take_message(self.subscription.msg_type, True)
                 if taken is not None:
-                    return taken[0]
+                    return taken if self.with_info else taken[0]
                 self.poll_dds = self.dds = False
             return self.queue.popleft() if self.queue else None
         if self.queue:
             return self.queue.popleft()
         taken = handle.take_message(self.subscription.msg_type, True)
-        return None if taken is None else taken[0]
+        return None if taken is None else taken if self.with_info else taken[0]
 
 
 class _PublisherRoute:
-    __slots__ = ("publisher", "topic", "targets", "outside_subscribers", "original")
+    __slots__ = ("publisher", "topic", "targets", "outside_subscribers", "original", "sequence")
 
     def __init__(self, publisher: Publisher, topic: RoutedTopic) -> None:
         self.publisher = publisher
         self.topic = topic
         self.targets: list[Route] = []
         self.outside_subscribers = False
+        #: this publisher's messages so far: the publication sequence number DDS's writer gives (1, 2, ...)
+        self.sequence = 0
         # the class's publish bound to this publisher (the instance attribute installed below shadows it)
         self.original: Callable = Publisher.publish.__get__(publisher)
 
@@ -146,13 +158,16 @@ class IntraProcessRouter:
     """See the module doc. :meth:`build` (again whenever the graph's entities change), :meth:`route_of` for the
     sweep, :meth:`check_outside` at the start of every drain, :meth:`close` to give the publishers back."""
 
-    def __init__(self, verify: bool = False, check_every: int = 10) -> None:
+    def __init__(self, verify: bool = False, check_every: int = 10, route_message_info: bool = True) -> None:
         """``verify``: keep a copy of each published message and check at every delivery that neither the
         publisher nor an earlier subscriber changed it (:meth:`delivered`; for tests: it copies everything).
-        ``check_every``: look for endpoints outside the graph at every so many drains (:meth:`check_outside`)."""
+        ``check_every``: look for endpoints outside the graph at every so many drains (:meth:`check_outside`).
+        ``route_message_info`` False: a topic with a MessageInfo callback stays with DDS (as before the router
+        numbered them; benchmarks/bench_graph.py's lever)."""
         if check_every < 1:
             raise ValueError(f"check_every must be >= 1, got {check_every}")
         self.verify = verify
+        self.route_message_info = route_message_info
         self.check_every = check_every
         self._checks = 0
         self.topics: dict[str, RoutedTopic] = {}
@@ -178,7 +193,8 @@ class IntraProcessRouter:
         for name, subs in subscriptions.items():
             pubs = publishers.get(name, [])
             routable = (bool(pubs)
-                        and all(s._callback_type is Subscription.CallbackType.MessageOnly for s in subs)
+                        and (self.route_message_info
+                             or all(s._callback_type is Subscription.CallbackType.MessageOnly for s in subs))
                         and all(_volatile(s.qos_profile) for s in subs)
                         and all(_volatile(p.qos_profile) for p in pubs))
             topic = self.topics.get(name)
@@ -187,11 +203,12 @@ class IntraProcessRouter:
                     continue
                 topic = self.topics[name] = RoutedTopic(name)
             elif topic.routed and not routable:  # keep its queues: they are delivered first, then DDS
-                self._fall_back(topic, "its endpoints in the graph changed (a MessageInfo, TRANSIENT_LOCAL or "
-                                       "publisher-less endpoint)")
+                self._fall_back(topic, "its endpoints in the graph changed (a TRANSIENT_LOCAL or publisher-less "
+                                       "endpoint)")
             topic.routes, topic.publishers = [], []
             for subscription in subs:
-                if subscription._callback_type is not Subscription.CallbackType.MessageOnly:
+                if not self.route_message_info and \
+                        subscription._callback_type is not Subscription.CallbackType.MessageOnly:
                     continue  # a fallen-back topic: served by the sweep's plain DDS path, with its MessageInfo
                 route = old_routes.get(id(subscription))
                 if route is None or route.subscription is not subscription:
@@ -222,14 +239,24 @@ class IntraProcessRouter:
         def publish(msg) -> None:
             if not topic.routed:
                 entry.original(msg)
+                entry.sequence += 1
                 return
             if not isinstance(msg, (msg_type, bytes)):  # what rclpy's Publisher.publish raises
                 raise TypeError(f"Expected {msg_type}, got {type(msg)}")
+            entry.sequence += 1
             if wire_copy and not isinstance(msg, bytes):
                 msg = _copy(msg)  # float32 scalars rounded as on the wire
             item = (msg, _copy(msg)) if verify and not isinstance(msg, bytes) else msg
+            info = None
             for route in entry.targets:
-                route.queue.append(item)
+                if route.with_info:
+                    if info is None:  # what DDS's reader gives (rclpy's MessageInfo keys; wall-clock stamps)
+                        now = time.time_ns()
+                        info = {"source_timestamp": now, "received_timestamp": now,
+                                "publication_sequence_number": entry.sequence, "reception_sequence_number": None}
+                    route.queue.append((item, info))
+                else:
+                    route.queue.append(item)
             if entry.outside_subscribers:
                 entry.original(msg)
                 topic.dds_copies = True

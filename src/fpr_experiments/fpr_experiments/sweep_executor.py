@@ -20,7 +20,8 @@ when something may be ready (right after it stepped the simulator or read MAVLin
 - delivers the graph's messages in process (:mod:`fpr_experiments.intra_process`, ``intra_process=True``, the
   default): a publish of a node of the graph hands the message object to the queue of each subscription of the
   graph, without DDS, and the sweep only takes from subscriptions with something queued (DDS serves what
-  comes from outside the graph, what is TRANSIENT_LOCAL and /fpr/info, whose callbacks read DDS's MessageInfo);
+  comes from outside the graph and what is TRANSIENT_LOCAL; a callback that takes ``MessageInfo``, as the
+  controllers' /fpr/info, gets one numbered as DDS's writer numbers it);
 - converts each message into Python once for all of its subscribers in the process: it takes the serialized
   message (a raw take, ~2 µs) and deserializes it once per drain (rclpy's ``deserialize_message``), so the n
   controllers, n bridges and the recorder that read one /fpr/info ζ, and the ~13 TimeSources that read one
@@ -70,14 +71,15 @@ class SweepExecutor:
     MAX_SWEEPS = 10_000
 
     def __init__(self, share_messages: bool = True, intra_process: bool = True, verify: bool = False,
-                 outside_check_every: int = 10) -> None:
+                 outside_check_every: int = 10, route_message_info: bool = True) -> None:
         """``share_messages``: one Python message per received message for all subscribers (else one each, as
         rclpy). ``intra_process``: deliver among the graph's nodes without DDS (:mod:`fpr_experiments.intra_process`;
         nodes added with :meth:`add_publisher_node` publish in process too; ``verify``: check that no message
         changes after it was published; ``outside_check_every``: drains between two looks for endpoints outside the
-        graph; IntraProcessRouter)."""
+        graph; ``route_message_info``: route the topics whose callbacks take MessageInfo too; IntraProcessRouter)."""
         self.share_messages = share_messages
-        self.router = IntraProcessRouter(verify=verify, check_every=outside_check_every) if intra_process else None
+        self.router = IntraProcessRouter(verify=verify, check_every=outside_check_every,
+                                         route_message_info=route_message_info) if intra_process else None
         #: nodes whose publishers are routed but whose callbacks somebody else runs (the simulator)
         self._publisher_nodes: list[Node] = []
         #: this drain's deserialized messages, by (type, serialized bytes): one conversion per message
@@ -176,7 +178,10 @@ class SweepExecutor:
                     if item is None:
                         continue
                     ran += 1
-                    _run(subscription.callback, (self._routed(subscription, route, item),), errors)
+                    if route.with_info:  # (message, MessageInfo), as rclpy calls such a callback
+                        _run(subscription.callback, (self._routed(subscription, route, item[0]), item[1]), errors)
+                    else:
+                        _run(subscription.callback, (self._routed(subscription, route, item),), errors)
                     continue
                 shared = self.share_messages and not subscription.raw
                 taken = subscription.handle.take_message(subscription.msg_type, shared or subscription.raw)

@@ -1,10 +1,10 @@
 """In-process delivery (fpr_experiments.intra_process through the SweepExecutor, real rclpy): a graph node's
 publish reaches the graph's subscriptions as the same object without DDS, in order, within the subscription's
-KEEP_LAST depth and only where the QoS would match; what must stay with DDS does (MessageInfo callbacks,
-TRANSIENT_LOCAL, float32 scalars get a CDR copy); a subscriber outside the graph still receives everything through
-DDS; a publisher outside the graph sends its topic back to DDS, announced, without losing or duplicating; the
-verifying mode catches a publisher that changes a message after publishing it. The whole graph flown both ways is
-compared bit for bit in tests/test_determinism.py."""
+KEEP_LAST depth and only where the QoS would match; MessageInfo callbacks get DDS's publication sequence
+numbers; what must stay with DDS does (TRANSIENT_LOCAL; float32 scalars get a CDR copy); a subscriber outside the
+graph still receives everything through DDS; a publisher outside the graph sends its topic back to DDS, announced,
+without losing or duplicating; the verifying mode catches a publisher that changes a message after publishing it.
+The whole graph flown both ways is compared bit for bit in tests/test_determinism.py."""
 
 from __future__ import annotations
 
@@ -115,13 +115,47 @@ def test_incompatible_qos_is_not_delivered(context, request):
     assert received == []  # a reliable reader does not match a best-effort writer in DDS either
 
 
-def test_message_info_and_transient_local_topics_stay_with_dds(context, request):
-    info_topic, latched_topic = _topic(request, "with_info"), _topic(request, "latched")
-    talker, listener = _node("talker", context), _node("listener", context)
+def _info_flight(context, topic: str, intra_process: bool):
+    """Two publishers on one topic, a MessageInfo subscriber and a plain one; five interleaved publishes."""
+    first, second, listener = _node("first", context), _node("second", context), _node("listener", context)
     with_info: list = []
+    plain: list = []
+    publishers = [first.create_publisher(Int32, topic, 10), second.create_publisher(Int32, topic, 10)]
+    subscription = listener.create_subscription(Int32, topic, lambda m, info: with_info.append((m.data, info)), 10)
+    listener.create_subscription(Int32, topic, plain.append, 10)
+    executor = SweepExecutor(intra_process=intra_process)
+    for node in (first, second, listener):
+        executor.add_node(node)
+    _wait(lambda: all(p.get_subscription_count() == 2 for p in publishers), "no match")
+    executor.drain([])  # the router is built before anything is published (as in the graph)
+    for k, publisher in enumerate([0, 1, 0, 1, 0]):
+        publishers[publisher].publish(Int32(data=10 * publisher + k))
+    if not intra_process:
+        _wait(lambda: subscription.handle.get_publisher_count() == 2, "no match")
+        time.sleep(0.2)
+    executor.drain([])
+    return executor, subscription, with_info, [m.data for m in plain]
+
+
+def test_message_info_callbacks_are_routed_with_the_sequence_numbers_dds_gives(context, request):
+    """The controllers' /fpr/info callback takes MessageInfo and tells publishers apart by the publication
+    sequence number: routed, it gets the number DDS's writer would give (per publisher, from 1), the same keys."""
+    routed_topic, dds_topic = _topic(request, "routed"), _topic(request, "dds")
+    executor, subscription, routed, plain = _info_flight(context, routed_topic, intra_process=True)
+    assert routed_topic in executor.router.topics and executor.router.fallbacks == []
+    assert subscription.handle.take_message(Int32, True) is None  # nothing went through DDS
+    _, _, through_dds, dds_plain = _info_flight(context, dds_topic, intra_process=False)
+    assert [d for d, _ in routed] == [d for d, _ in through_dds] == plain == dds_plain == [0, 11, 2, 13, 4]
+    numbers = [info["publication_sequence_number"] for _, info in routed]
+    assert numbers == [info["publication_sequence_number"] for _, info in through_dds] == [1, 1, 2, 2, 3]
+    assert all(info.keys() == through_dds[0][1].keys() for _, info in routed)
+    assert all(info["reception_sequence_number"] is None for _, info in routed + through_dds)
+
+
+def test_transient_local_topics_stay_with_dds(context, request):
+    latched_topic = _topic(request, "latched")
+    talker, listener = _node("talker", context), _node("listener", context)
     latched: list = []
-    info_pub = talker.create_publisher(Int32, info_topic, 10)
-    listener.create_subscription(Int32, info_topic, lambda m, info: with_info.append((m.data, info)), 10)
     latched_qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     latched_pub = talker.create_publisher(Int32, latched_topic, latched_qos)
     executor = SweepExecutor()
@@ -130,13 +164,11 @@ def test_message_info_and_transient_local_topics_stay_with_dds(context, request)
     assert executor.router.topics == {}
     latched_pub.publish(Int32(data=7))
     listener.create_subscription(Int32, latched_topic, latched.append, latched_qos)  # joins late
-    _wait(lambda: info_pub.get_subscription_count() == 1, "no match")
-    info_pub.publish(Int32(data=3))
     _wait(lambda: latched_pub.get_subscription_count() == 1, "no match")
     time.sleep(0.2)  # the late joiner's replay
     executor.drain([])
-    assert [d for d, _ in with_info] == [3] and with_info[0][1]["publication_sequence_number"] == 1
     assert [m.data for m in latched] == [7]
+    assert latched_topic not in executor.router.topics
 
 
 def test_float32_scalars_are_rounded_as_on_the_wire(context, request):
