@@ -70,7 +70,11 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
                                                                      "baseline"),
           # the default with the MessageInfo callbacks (the controllers' zeta) through DDS, as before the router
           # numbered them itself (fpr_experiments.intra_process)
-          "default, MessageInfo topics through DDS": (True, True, 100.0, "ideal", "sweep-info-dds")}
+          "default, MessageInfo topics through DDS": (True, True, 100.0, "ideal", "sweep-info-dds"),
+          # the default with the simulator reading /clock too (use_sim_time, as before fpr_experiments.graph left it
+          # out): its one DDS reader made every /clock message cross DDS
+          "default, the simulator subscribed to /clock": (True, True, 100.0, "ideal", "sweep",
+                                                          {"simulator": {"use_sim_time": True}})}
 
 
 def _cpu() -> float:

@@ -4,7 +4,8 @@
 overrides, remappings, and the process group each node runs in on the robot — for n UAVs, a controller mode,
 cameras (rendered images + ``aruco_detector``, or the simulator's emulated marker poses) and a backend:
 
-- ``sim``: the ``simulator`` node replaces the hardware; every node runs on simulated time (``use_sim_time``);
+- ``sim``: the ``simulator`` node replaces the hardware; every other node runs on simulated time (``use_sim_time``;
+  the simulator is the clock);
 - ``real``: the robot. No simulator, no ``use_sim_time``; the camera images come from a camera driver on each
   companion computer (``/fpr/uav<i>/camera/image_raw`` + ``camera_info``), the PX4 links from each bridge's
   ``connection_url`` (a params file per vehicle), and ``/fpr/motion_capture`` (fpr_msgs/FprState; the centralized /
@@ -178,7 +179,10 @@ def _spec(options: GraphOptions, executable: str, namespace: str, group: str, in
     files = [config_path(package, default_file)] if default_file else []
     files += [str(f) for f in options.params_files.get(executable, [])]
     parameters: dict[str, Any] = {}
-    if options.backend == "sim":
+    if options.backend == "sim" and executable != "simulator":
+        # the simulator IS the clock: it stamps with its own simulated time, and a /clock subscription of its own
+        # would only read back what it publishes (in the in-process runner it also made every /clock message go
+        # through DDS for that one reader: ~4 % of the CPU, docs/benchmarks.md)
         parameters["use_sim_time"] = True
     parameters.update(instance)
     parameters.update(options.parameters.get(executable, {}))

@@ -28,7 +28,8 @@ def test_sim_graph_has_the_simulator_four_nodes_per_uav_and_the_ground_station()
             assert f"/fpr/uav{i}/{node}" in names
     assert "/fpr/ground/teleop" in names and "/fpr/ground/joy_script" in names
     assert list(groups(specs)) == ["simulator", "uav1", "uav2", "uav3", "ground"]
-    assert all(s.parameters["use_sim_time"] is True for s in specs)
+    assert all(s.parameters["use_sim_time"] is True for s in specs if s.executable != "simulator")
+    assert "use_sim_time" not in specs[0].parameters  # the simulator is the clock, it does not read /clock
     controllers = [s for s in specs if s.executable == "controller"]
     assert [(c.parameters["uav_id"], c.parameters["mode"], c.parameters["n"]) for c in controllers] == [
         (1, "impedance", 3), (2, "impedance", 3), (3, "impedance", 3)]

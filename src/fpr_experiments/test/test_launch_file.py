@@ -93,7 +93,8 @@ def test_launch_file_builds_the_descriptions_node_list(launch_module, arguments)
     if arguments.get("backend", "sim") == "sim":
         assert [a.args for a in environment] == [("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")]
         assert nodes[0].kwargs["executable"] == "simulator"
-        assert all(n.kwargs["parameters"][-1]["use_sim_time"] is True for n in nodes)
+        assert all(n.kwargs["parameters"][-1]["use_sim_time"] is True for n in nodes[1:])
+        assert "use_sim_time" not in nodes[0].kwargs["parameters"][-1]  # the simulator is the clock
     else:
         assert environment == []
         assert all(n.kwargs["executable"] != "simulator" for n in nodes)
