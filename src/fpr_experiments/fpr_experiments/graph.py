@@ -182,7 +182,8 @@ def _spec(options: GraphOptions, executable: str, namespace: str, group: str, in
     if options.backend == "sim" and executable != "simulator":
         # the simulator IS the clock: it stamps with its own simulated time, and a /clock subscription of its own
         # would only read back what it publishes (in the in-process runner it also made every /clock message go
-        # through DDS for that one reader: ~4 % of the CPU, docs/benchmarks.md)
+        # through DDS for that one reader: ~1 % of the CPU in a profile, not measurable as a lever,
+        # docs/benchmarks.md; the multi-process runner's count of /clock readers did not include it either)
         parameters["use_sim_time"] = True
     parameters.update(instance)
     parameters.update(options.parameters.get(executable, {}))
