@@ -16,7 +16,8 @@ What it does (:class:`IntraProcessRouter`, driven by :class:`fpr_experiments.swe
 - a subscription whose callback takes ``MessageInfo`` (the controllers' /fpr/info: they tell publishers apart by
   the publication sequence number, fpr_control.information) gets with each routed message the dict rclpy's take
   gives: ``publication_sequence_number`` counted per publisher from 1, one per publish, as Fast DDS's writer counts
-  (checked: tests/test_intra_process.py; the routed and the DDS flights are bit-identical, tests/test_determinism.py),
+  (checked against DDS: src/fpr_experiments/test/test_intra_process.py; routed and DDS flights are bit-identical:
+  tests/test_determinism.py),
   ``source_timestamp`` = ``received_timestamp`` = the wall clock at the publish [ns], ``reception_sequence_number``
   None (Fast DDS gives none). The count starts when the router first routes the publisher: a publisher that had
   published through DDS before (none in the graph: /fpr/info is published from the controllers' timers, which run

@@ -56,15 +56,20 @@ def _result(tmp_path, experiment, metrics_by_variant):
     return ExperimentResult(experiment.id, variants, str(tmp_path))
 
 
-def test_experiment_report_json_results_markdown_and_claims(tmp_path):
-    experiment = experiment_from_dict({
+def _hover_experiment(**extra):
+    """A two-variant table_3_2 with one roll column (plus ``extra`` catalog keys)."""
+    return experiment_from_dict({
         "id": "table_3_2", "title": "hover", "thesis": "Table 3.2", "scenario": "ground_start",
         "script": "integration_flight", "duration": 10.0,
         "variants": [{"id": "impedance", "label": "Impedance", "thesis_row": "Impedance"},
                      {"id": "pd", "label": "PD", "thesis_row": "PD"}],
         "metrics": [{"metric": "roll_rmse_deg", "table": "3.2", "column": "RMSE phi_p (roll)", "label": "roll"}],
-        "claims": [{"text": "impedance tracks roll within 1 deg", "line": 5102, "lhs": "roll_rmse_deg", "op": "<",
-                    "rhs": 1.0}]})
+        **extra})
+
+
+def test_experiment_report_json_results_markdown_and_claims(tmp_path):
+    experiment = _hover_experiment(claims=[{"text": "impedance tracks roll within 1 deg", "line": 5102,
+                                            "lhs": "roll_rmse_deg", "op": "<", "rhs": 1.0}])
     result = _result(tmp_path, experiment, {"impedance": {"roll_rmse_deg": 0.2}, "pd": {"roll_rmse_deg": math.nan}})
     summary = report.write_experiment_report(experiment, result, str(tmp_path), plots=False)
     written = json.loads((tmp_path / "metrics.json").read_text())
@@ -83,12 +88,7 @@ def test_experiment_report_json_results_markdown_and_claims(tmp_path):
 
 def test_take_off_hops_are_stated_beside_the_table(tmp_path):
     """A flight whose structure hopped at take-off (takeoff_touchdowns > 0, not a check) says so in results.md."""
-    experiment = experiment_from_dict({
-        "id": "table_3_2", "title": "hover", "thesis": "Table 3.2", "scenario": "ground_start",
-        "script": "integration_flight", "duration": 10.0,
-        "variants": [{"id": "impedance", "label": "Impedance", "thesis_row": "Impedance"},
-                     {"id": "pd", "label": "PD", "thesis_row": "PD"}],
-        "metrics": [{"metric": "roll_rmse_deg", "table": "3.2", "column": "RMSE phi_p (roll)", "label": "roll"}]})
+    experiment = _hover_experiment()
     result = _result(tmp_path, experiment, {"impedance": {"roll_rmse_deg": 4.0, "takeoff_touchdowns": 2.0},
                                             "pd": {"roll_rmse_deg": 9.0, "takeoff_touchdowns": 0.0}})
     summary = report.write_experiment_report(experiment, result, str(tmp_path), plots=False)
