@@ -12,8 +12,9 @@ nothing either: the same flight with a conversion per subscription ("sweep-copy"
 ground truth. Nor does the in-process delivery (fpr_experiments.intra_process, the default): the same flight with
 every message through DDS ("sweep-dds") gives the same ground truth, and the loaded flight runs with the delivery's
 check that no message changes after it was published (a publisher reusing its message, a subscriber modifying
-what it received: the run raises). Nor do the overlap benchmark's options (the simulator's messages through DDS,
-the per-period CPU measurement).
+what it received: the run raises). Nor does the overlap benchmark's per-period CPU measurement. The overlapped
+two-process layout (fpr_experiments.overlapped) is deterministic under load too, and one /clock period of control
+latency away from the one-process flight.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import pytest
 from fpr_experiments.catalog import load_experiment
 from fpr_experiments.graph import describe_graph
 from fpr_experiments.inprocess import InProcessGraph
+from fpr_experiments.overlapped import OverlappedGraph
 from fpr_experiments.recording import flight_record, recorded_topics
 from fpr_experiments.resources import SCENARIOS
 from fpr_experiments.runner import graph_options
@@ -39,12 +41,17 @@ def _burn(stop_at: float) -> None:
         x = (x * 1103515245 + 12345) % 2 ** 31
 
 
-def _fly(executor: str | None = None, verify_delivery: bool = False, **runner_options) -> dict[str, np.ndarray]:
+def _fly(executor: str | None = None, verify_delivery: bool = False, overlapped: bool = False,
+         **runner_options) -> dict[str, np.ndarray]:
     experiment = load_experiment("takeoff_landing")
     variant = experiment.variants[0]
     specs = describe_graph(graph_options(experiment, variant, SCENARIOS.resolve(experiment.scenario), "emulated", 3))
-    with InProcessGraph(specs, recorded_topics(3), deterministic=True, executor=executor,
-                        verify_delivery=verify_delivery, **runner_options) as graph:
+    if overlapped:
+        graph = OverlappedGraph(specs, recorded_topics(3), verify_delivery=verify_delivery, **runner_options)
+    else:
+        graph = InProcessGraph(specs, recorded_topics(3), deterministic=True, executor=executor,
+                               verify_delivery=verify_delivery, **runner_options)
+    with graph:
         graph.wait_for_discovery()
         assert graph.run_until(lambda: graph.sim_time >= SECONDS - 1e-9, wall_timeout=300.0)
         assert graph.wait_for_recorder()
@@ -59,9 +66,10 @@ def _fly(executor: str | None = None, verify_delivery: bool = False, **runner_op
             "period_costs": period_costs}
 
 
-@pytest.fixture(scope="module")
-def flights():
-    quiet = _fly()
+def _quiet_and_loaded(overlapped: bool = False) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The flight on whatever the machine is doing, then with a CPU burner per core (and the in-process delivery's
+    check that no message changes after it was published)."""
+    quiet = _fly(overlapped=overlapped)
     stop_at = time.monotonic() + 600.0
     burners = [multiprocessing.Process(target=_burn, args=(stop_at,), daemon=True)
                for _ in range(max(2, multiprocessing.cpu_count()))]
@@ -69,15 +77,20 @@ def flights():
         burner.start()
     try:
         start = time.monotonic()
-        loaded = _fly(verify_delivery=True)
-        print(f"\n[determinism] loaded flight: {SECONDS:.0f} s simulated in {time.monotonic() - start:.1f} s wall "
-              f"with {len(burners)} CPU burners", flush=True)
+        loaded = _fly(verify_delivery=True, overlapped=overlapped)
+        print(f"\n[determinism] loaded flight{' (overlapped layout)' if overlapped else ''}: {SECONDS:.0f} s "
+              f"simulated in {time.monotonic() - start:.1f} s wall with {len(burners)} CPU burners", flush=True)
     finally:
         for burner in burners:
             burner.terminate()
         for burner in burners:
             burner.join(timeout=5.0)
     return quiet, loaded
+
+
+@pytest.fixture(scope="module")
+def flights():
+    return _quiet_and_loaded()
 
 
 def test_both_recordings_are_complete(flights):
@@ -124,15 +137,44 @@ def test_in_process_delivery_changes_nothing(flights):
     _assert_same_flight(quiet, _fly(executor="sweep-dds"))
 
 
-def test_simulator_messages_through_dds_and_period_measurement_change_nothing(flights):
-    """benchmarks/bench_graph.py --overlap: the simulator's messages crossing DDS (as from a process of its own) and
-    the per-period CPU measurement leave the flight as it is; one (time, simulator CPU, graph CPU) per /clock
-    period (100 Hz)."""
+def test_period_measurement_changes_nothing(flights):
+    """benchmarks/bench_graph.py --overlap: the per-period CPU measurement leaves the flight as it is; one (time,
+    simulator CPU, graph CPU) per /clock period (100 Hz)."""
     quiet, _ = flights
-    measured = _fly(simulator_through_dds=True, measure_periods=True)
+    measured = _fly(measure_periods=True)
     _assert_same_flight(quiet, measured)
     costs = measured["period_costs"]
     assert len(quiet["period_costs"]) == 0
     assert len(costs) == round(100 * SECONDS)
     np.testing.assert_allclose(costs[:, 0], np.arange(1, len(costs) + 1) * 0.01, atol=1e-9)
     assert np.all(costs[:, 1:] >= 0.0) and costs[:, 1].sum() > 0.0 and costs[:, 2].sum() > 0.0
+
+
+# ---- the overlapped two-process layout (fpr_experiments.overlapped) ---------------------------------------------
+@pytest.fixture(scope="module")
+def overlapped_flights():
+    return _quiet_and_loaded(overlapped=True)
+
+
+def test_overlapped_layout_same_flight_under_load(overlapped_flights):
+    """The simulator's process and the graph's run in parallel; what each reads of the other is fixed by the
+    period messages and the datagram counts, not by their timing."""
+    quiet, loaded = overlapped_flights
+    assert len(quiet["t"]) == round(100 * SECONDS)
+    _assert_same_flight(quiet, loaded)
+
+
+def test_overlapped_layout_is_the_same_flight_with_one_period_of_latency(flights, overlapped_flights):
+    """Not the one-process flight (the setpoints act one /clock period later), but the same take-off and climb: the
+    same setpoint stamps (the controllers run on the same /clock), the platform within 5 cm and the legs within 1
+    deg of the one-process flight at every sample."""
+    one_process, _ = flights
+    overlapped, _ = overlapped_flights
+    assert one_process["t"].shape == overlapped["t"].shape
+    assert not np.array_equal(one_process["position"], overlapped["position"])
+    assert np.array_equal(one_process["setpoints"][:, :2], overlapped["setpoints"][:, :2])
+    position_gap = np.abs(one_process["position"] - overlapped["position"]).max()
+    legs_gap = np.degrees(np.abs(one_process["legs"] - overlapped["legs"]).max())
+    print(f"\n[determinism] overlapped vs one process: platform {100 * position_gap:.2f} cm, legs {legs_gap:.3f} deg "
+          "apart at most")
+    assert position_gap < 0.05 and legs_gap < 1.0

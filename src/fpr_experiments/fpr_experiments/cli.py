@@ -44,6 +44,10 @@ def _parser() -> argparse.ArgumentParser:
                              "each node got; a name the node does not declare stops the run)")
     parser.add_argument("--processes", action="store_true",
                         help="one process per UAV / ground station / simulator, as on the robot (default: one)")
+    parser.add_argument("--overlapped", action="store_true",
+                        help="the simulator in a process of its own, stepping the next /clock period while the graph "
+                             "works on the last (fpr_experiments.overlapped): deterministic, one /clock period of "
+                             "added control latency; default: everything in one process")
     parser.add_argument("--real-time-factor", type=float, default=0.5,
                         help="pace of the simulator with --processes (default %(default)s; 2 cores here)")
     parser.add_argument("--variant", action="append", default=None,
@@ -99,6 +103,8 @@ def _experiment_flags(args) -> list[str]:
         tokens += ["--param", parameter]
     if args.processes:
         tokens.append("--processes")
+    if args.overlapped:
+        tokens.append("--overlapped")
     if args.opencv_dispatch != "baseline":
         tokens += ["--opencv-dispatch", args.opencv_dispatch]
     return tokens
@@ -242,6 +248,8 @@ def run_main(argv: list[str] | None = None) -> int:
 
         if args.realism is not None:
             check_realism(args.realism, "--realism")
+        if args.processes and args.overlapped:
+            raise ValueError("--processes and --overlapped are two layouts: choose one")
         overrides = scenario_overrides(args.overrides)
         parameters = parameter_overrides(args.parameters)
         experiments = [load_experiment(name) for name in names]  # every name and file checked before anything flies
@@ -261,7 +269,7 @@ def run_main(argv: list[str] | None = None) -> int:
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
                                     realism=args.realism, live_view_port=args.live_view,
                                     scenario_overrides=overrides, parameter_overrides=parameters,
-                                    opencv_dispatch=args.opencv_dispatch)
+                                    opencv_dispatch=args.opencv_dispatch, overlapped=args.overlapped)
             if not result.passed:
                 status = 1
                 failed.append(name)

@@ -61,7 +61,7 @@ class InProcessGraph:
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
                  real_time_factor: float | None = None, verify_delivery: bool = False,
-                 simulator_through_dds: bool = False, measure_periods: bool = False) -> None:
+                 measure_periods: bool = False) -> None:
         """``executor``: "sweep" (in-process delivery), "sweep-info-dds" (in-process delivery but for the callbacks
         that take MessageInfo, through DDS: before fpr_experiments.intra_process numbered them itself), "sweep-dds"
         (the sweep with every message through DDS),
@@ -72,11 +72,9 @@ class InProcessGraph:
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
         view watches (then the simulator's own parameter, 1 by default), threaded runs keep the parameter.
         ``verify_delivery`` (tests): the in-process delivery checks that no message changes after it was published
-        (fpr_experiments.intra_process; it copies every message, slower). ``simulator_through_dds`` (benchmarks):
-        the sweep does not deliver the simulator's messages in process, they cross DDS as they would from a
-        process of their own. ``measure_periods`` (benchmarks, deterministic mode): :attr:`period_costs` gets one
-        (simulation time [s], simulator CPU [s], graph CPU [s]) per /clock period, thread CPU time of the step
-        and of the drains that follow it."""
+        (fpr_experiments.intra_process; it copies every message, slower). ``measure_periods`` (benchmarks,
+        deterministic mode): :attr:`period_costs` gets one (simulation time [s], simulator CPU [s], graph CPU [s])
+        per /clock period, thread CPU time of the step and of the drains that follow it."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
@@ -87,7 +85,6 @@ class InProcessGraph:
             raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
         self.verify_delivery = verify_delivery
-        self.simulator_through_dds = simulator_through_dds
         self.measure_periods = measure_periods
         #: with ``measure_periods``: (simulation time [s], simulator CPU [s], graph CPU [s]) per /clock period
         self.period_costs: list[tuple[float, float, float]] = []
@@ -125,7 +122,7 @@ class InProcessGraph:
 
     def _build(self, topics: Sequence[Topic]) -> None:
         for spec in self.specs:
-            node = build_node(spec, self.context, lean=self.lean)
+            node = self._build_node(spec)
             self.nodes.append(node)
             self.by_name[spec.fully_qualified_name] = node
             if spec.executable == "simulator":
@@ -142,7 +139,7 @@ class InProcessGraph:
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)
-            if self.simulator is not None and not self.simulator_through_dds:
+            if self.simulator is not None:
                 self._sweep.add_publisher_node(self.simulator)
         else:
             self._executor = SingleThreadedExecutor(context=self.context)
@@ -156,6 +153,10 @@ class InProcessGraph:
         if not self.deterministic:
             self._spinner = threading.Thread(target=self._spin, name="graph_executor", daemon=True)
             self._spinner.start()
+
+    def _build_node(self, spec: NodeSpec) -> Node:
+        """One node of the graph (fpr_experiments.overlapped builds the simulator's stand-in instead)."""
+        return build_node(spec, self.context, lean=self.lean)
 
     def _spin(self) -> None:
         executor = self._executor

@@ -121,8 +121,11 @@ def column_label(column) -> str:
 
 
 def write_experiment_report(experiment: Experiment, result, root: str, *, quick: bool = False,
-                            seed: int | None = None, processes: bool = False, plots: bool = True) -> dict[str, Any]:
+                            seed: int | None = None, processes: bool = False, plots: bool = True,
+                            overlapped: bool = False) -> dict[str, Any]:
     """``<root>/metrics.json`` (and the comparison plots); returns the summary it wrote."""
+    from fpr_experiments.runner import layout_name
+
     comparisons, orderings = compare(experiment, result.metrics)
     labels = _labels(experiment)
     variants = {}
@@ -148,7 +151,7 @@ def write_experiment_report(experiment: Experiment, result, root: str, *, quick:
     summary = {
         "experiment": experiment.id, "title": experiment.title, "thesis": experiment.thesis,
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"), "commit": git_commit(),
-        "quick": quick, "seed": seed, "runner": "processes" if processes else "one process",
+        "quick": quick, "seed": seed, "runner": layout_name(processes, overlapped),
         "choices": experiment.choices, "variants": variants,
         "orderings": [{"metric": o.metric, "label": column_label(next(c for c in experiment.metrics
                                                                        if c.metric == o.metric)),

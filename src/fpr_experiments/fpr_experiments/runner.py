@@ -183,17 +183,22 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
                 scenario_overrides: Mapping[str, Any] | None = None,
                 live_view_port: int | None = None,
                 parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                opencv_dispatch: str = "baseline") -> VariantResult:
+                opencv_dispatch: str = "baseline", overlapped: bool = False) -> VariantResult:
     """Fly one variant and write its report folder (see the module doc); ``realism`` None: the experiment's
     profile; ``scenario_overrides`` deep-merged over the variant's scenario (:func:`effective_scenario`);
     ``parameter_overrides`` ``{executable: {parameter: value}}`` laid over the experiment's and the variant's node
     parameters (every node of that executable; graph.json keeps what each node got); ``opencv_dispatch``
     (fpr_model.opencv_dispatch) ``baseline``: the rendered images and the detections do not depend on the CPU
-    (the flight is the same on every x86_64 machine), ``native``: OpenCV's own SIMD choice, as on the robot."""
+    (the flight is the same on every x86_64 machine), ``native``: OpenCV's own SIMD choice, as on the robot.
+    ``overlapped``: the simulator in a process of its own beside the graph (fpr_experiments.overlapped: one
+    /clock period of added control latency; not with ``processes``)."""
     from fpr_experiments import report
     from fpr_experiments.metrics import compute_metrics
     from fpr_experiments.recording import flight_record, recorded_topics, write_mcap
 
+    if processes and overlapped:
+        raise ValueError("choose one layout: processes (one per UAV group) or overlapped (the simulator beside the "
+                         "graph)")
     variant = with_parameter_overrides(variant, parameter_overrides)
     resolved = experiment.resolved(variant)
     duration = resolved["quick_duration"] if quick else resolved["duration"]
@@ -219,7 +224,7 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
              f"{' + node parameters ' + _parameters_text(parameter_overrides) if parameter_overrides else ''}, "
              f"seed {scenario.seed}, {duration:.0f} s simulated"
              f"{' (quick)' if quick else ''}{', OpenCV ' + opencv_dispatch if cameras == 'images' else ''}, "
-             f"{'processes' if processes else 'one process'} -> {output_dir}")
+             f"{layout_name(processes, overlapped)} -> {output_dir}")
     wall_start = time.monotonic()
     live_view = None
     if live_view_port is not None:
@@ -236,7 +241,7 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
                 outcome = run_processes(specs, topics, duration, output_dir=output_dir,
                                         real_time_factor=real_time_factor, label=label, log=log, live_view=live_view)
             else:
-                outcome = _run_in_process(specs, topics, duration, label, log, live_view)
+                outcome = _run_in_process(specs, topics, duration, label, log, live_view, overlapped)
     finally:
         if live_view is not None:
             live_view.stop()
@@ -296,10 +301,18 @@ def _last_time(recording) -> float:
     return clock[-1].clock.sec + 1e-9 * clock[-1].clock.nanosec if clock else 0.0
 
 
-def _run_in_process(specs, topics, duration: float, label: str, log: bool, live_view=None):
-    from fpr_experiments.inprocess import InProcessGraph
+def layout_name(processes: bool, overlapped: bool) -> str:
+    """The runner's layout as the log and the reports say it."""
+    return "processes" if processes else "overlapped (two processes)" if overlapped else "one process"
 
-    with InProcessGraph(specs, topics, live_view=live_view) as graph:
+
+def _run_in_process(specs, topics, duration: float, label: str, log: bool, live_view=None, overlapped: bool = False):
+    if overlapped:
+        from fpr_experiments.overlapped import OverlappedGraph as Graph
+    else:
+        from fpr_experiments.inprocess import InProcessGraph as Graph
+
+    with Graph(specs, topics, live_view=live_view) as graph:
         took = graph.wait_for_discovery()
         if log:
             _say(f"[{label}] {len(graph.nodes)} nodes built and discovered in {took:.1f} s")
@@ -323,7 +336,7 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
                    scenario_overrides: Mapping[str, Any] | None = None,
                    live_view_port: int | None = None,
                    parameter_overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                   opencv_dispatch: str = "baseline") -> ExperimentResult:
+                   opencv_dispatch: str = "baseline", overlapped: bool = False) -> ExperimentResult:
     """Run experiment ``name`` (all its variants, or ``variants``) and write ``<output_root>/<name>/``.
 
     ``realism``: a realism profile (fpr_sim.scenario.realism_profiles) instead of the experiment's (catalog key
@@ -333,7 +346,8 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
     serve each flight to the Foxglove app on ws://127.0.0.1:<port> while it runs (fpr_experiments.live_view; 0: an
     ephemeral port, printed). ``parameter_overrides``: node parameters of every variant, ``{executable: {name:
     value}}`` (ablations of the onboard software; a name no node of the executable declares stops the run).
-    ``opencv_dispatch``: see :func:`run_variant` (default ``baseline``: the same flight on every CPU)."""
+    ``opencv_dispatch``: see :func:`run_variant` (default ``baseline``: the same flight on every CPU).
+    ``overlapped``: the simulator beside the graph in a process of its own (:func:`run_variant`)."""
     from fpr_experiments import report
     from fpr_experiments.catalog import check_realism
 
@@ -349,10 +363,10 @@ def run_experiment(name: str, *, seed: int | None = None, quick: bool = False, c
             experiment, variant, os.path.join(root, variant.id), seed=seed, quick=quick, cameras=cameras,
             processes=processes, real_time_factor=real_time_factor, plots=plots, log=log, realism=realism,
             scenario_overrides=scenario_overrides, live_view_port=live_view_port,
-            parameter_overrides=parameter_overrides, opencv_dispatch=opencv_dispatch)
+            parameter_overrides=parameter_overrides, opencv_dispatch=opencv_dispatch, overlapped=overlapped)
     result = ExperimentResult(experiment.id, results, root)
     result.summary = report.write_experiment_report(experiment, result, root, quick=quick, seed=seed,
-                                                    processes=processes, plots=plots)
+                                                    processes=processes, plots=plots, overlapped=overlapped)
     if log:
         _say("\n" + report.format_experiment_table(experiment, result.summary))
     return result

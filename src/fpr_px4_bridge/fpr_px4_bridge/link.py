@@ -239,6 +239,9 @@ class MavlinkLink:
         self.wall_clock = wall_clock
         self.target_system = int(target_system)
         self.counters = LinkCounters()
+        #: UDP: :meth:`receive` stops once ``counters.rx_datagrams`` reaches this (None: no limit); a graph beside
+        #: a simulator in another process reads exactly the datagrams of one period (fpr_experiments.overlapped)
+        self.receive_limit: int | None = None
         self.mav = mavlink.MAVLink(_DatagramWriter(self), srcSystem=int(system_id), srcComponent=int(component_id))
         self.signing = signing_key is not None
         if signing_key is not None:
@@ -336,6 +339,8 @@ class MavlinkLink:
                 return messages
             if not ready:
                 return messages
+        if self.receive_limit is not None and self._sock is not None:
+            max_datagrams = min(max_datagrams, self.receive_limit - self.counters.rx_datagrams)
         for _ in range(max_datagrams):
             try:
                 if self._sock is not None:

@@ -2,6 +2,7 @@
 
 import os
 import socket
+import time
 
 import pytest
 from fpr_px4_bridge.link import (
@@ -202,3 +203,19 @@ def test_signing_timestamps_follow_a_fake_wall_clock_and_strictly_increase():
     assert stamps[-1] * 1e-5 + 1420070400.0 == pytest.approx(clock[0], abs=0.05)
     assert listener.signing.goodsig_count == 2000 and listener.signing.badsig_count == 0
     assert late.signing.goodsig_count == 1500 and late.signing.badsig_count == 0
+
+
+def test_receive_limit_reads_exactly_up_to_the_count_and_keeps_the_rest_queued(listening_link):
+    """``receive_limit`` (a graph beside a simulator in another process, fpr_experiments.overlapped): the link reads
+    until its datagram count reaches the limit, the rest waits in the socket for a higher limit."""
+    link, sender = listening_link
+    for _ in range(5):
+        sender.sendto(_frame(system=1), link.local_address)
+    time.sleep(0.05)
+    link.receive_limit = 2
+    assert len(link.receive()) == 2 and link.counters.rx_datagrams == 2
+    assert link.receive() == [] and link.counters.rx_datagrams == 2  # at its limit: nothing more
+    link.receive_limit = 4
+    assert len(link.receive()) == 2 and link.counters.rx_datagrams == 4
+    link.receive_limit = None
+    assert len(link.receive()) == 1 and link.counters.rx_datagrams == 5

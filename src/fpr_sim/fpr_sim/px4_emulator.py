@@ -137,6 +137,7 @@ Attitude, IMU and local position come from the sensor sample (F0i, NED/FRD on th
 from __future__ import annotations
 
 import math
+import select
 import socket
 import time
 from collections import deque
@@ -358,6 +359,11 @@ class Px4Emulator:
         self.peer: tuple[str, int] | None = ("127.0.0.1", remote_port) if remote_port > 0 else None
         self.peer_latched = False  #: the partner was taken from a received frame (PX4: client source initialized)
         self.counters = EmulatorCounters()
+        #: datagrams handed to the socket (sendto accepted): the overlapped layout tells the graph how many to read
+        self.sent_datagrams = 0
+        #: gated reception (:meth:`admit`): the admitted datagrams not handled yet, or None (poll reads the socket)
+        self._admitted: deque[tuple[bytes, tuple[str, int]]] | None = None
+        self.admitted_datagrams = 0  #: datagrams admitted so far (:meth:`admit`)
         #: called with (sim time, uav id, raw thrust, raw q) for every SET_ATTITUDE_TARGET addressed to this PX4,
         #: before validation (fpr_sim.px4_log); None: off
         self.input_log: Callable[[float, int, float, object], None] | None = None
@@ -427,17 +433,49 @@ class Px4Emulator:
     def fileno(self) -> int:
         return self.sock.fileno()
 
-    def poll(self, sim_time: float) -> int:
-        """Read and handle every pending datagram at simulation time ``sim_time`` [s]; returns how many."""
-        self.time = sim_time
-        count = 0
-        while True:
+    def admit(self, total: int, timeout: float) -> None:
+        """Gated reception, for a simulator that runs beside its graph in another process
+        (fpr_experiments.overlapped): move datagrams from the socket into the admitted queue until ``total`` were
+        admitted since the first call, waiting up to ``timeout`` s of wall time for those still in flight (a
+        loopback datagram can be delivered after its sender's next message, when the kernel defers the delivery).
+        From the first call on, :meth:`poll` handles admitted datagrams only: what arrives early waits in the
+        socket for a later ``admit``, so the datagrams handled in a step never depend on the two processes' timing.
+        ``TimeoutError`` names the UAV and the counts (the sender is dead, or its datagrams were lost)."""
+        if self._admitted is None:
+            self._admitted = deque()
+        deadline = None
+        while self.admitted_datagrams < total:
             try:
                 data, address = self.sock.recvfrom(4096)
             except (BlockingIOError, InterruptedError):
-                break
-            except OSError:
-                break
+                now = time.monotonic()
+                deadline = now + timeout if deadline is None else deadline
+                if now >= deadline:
+                    raise TimeoutError(f"uav{self.uav_id}'s PX4 emulator: {self.admitted_datagrams} of the {total} "
+                                       f"datagrams its client sent arrived within {timeout:g} s") from None
+                select.select([self.sock], [], [], deadline - now)
+                continue
+            self._admitted.append((data, address))
+            self.admitted_datagrams += 1
+
+    def poll(self, sim_time: float) -> int:
+        """Read and handle every pending datagram (only admitted ones after :meth:`admit`) at simulation time
+        ``sim_time`` [s]; returns how many."""
+        self.time = sim_time
+        count = 0
+        admitted = self._admitted
+        while True:
+            if admitted is not None:
+                if not admitted:
+                    break
+                data, address = admitted.popleft()
+            else:
+                try:
+                    data, address = self.sock.recvfrom(4096)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:
+                    break
             count += 1
             self.counters.datagrams += 1
             self._reset_parser()  # UDP datagrams carry whole frames: a broken one must not eat the next
@@ -1123,7 +1161,8 @@ class Px4Emulator:
         try:
             self.sock.sendto(message.pack(self.mav), target)
         except OSError:
-            pass
+            return
+        self.sent_datagrams += 1
 
     def keep_alive(self) -> None:
         """A HEARTBEAT now, outside the streams (simulation only): the simulator sends one every few tenths of a

@@ -476,3 +476,33 @@ def test_command_latency_is_validated():
     for bad in (-0.01, float("nan"), 0.5):
         with pytest.raises(ValueError, match="command_latency"):
             scenario_from_dict({"px4": {"command_latency": bad}})
+
+
+def test_admitted_reception_handles_exactly_the_admitted_datagrams():
+    """Gated reception (fpr_experiments.overlapped): after ``admit(total)``, poll handles only datagrams admitted so
+    far, however many more are waiting in the socket; ``admit`` waits for datagrams still in flight and says which
+    UAV's are missing after its timeout. ``sent_datagrams`` counts what the emulator sent."""
+    emulator = Px4Emulator(1, Px4Config(), 0.0, local_port=0, remote_port=0)
+    client = _udp_socket()
+    mav = mavutil.mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    try:
+        for _ in range(4):
+            client.sendto(mav.heartbeat_encode(type=6, autopilot=8, base_mode=0, custom_mode=0,
+                                               system_status=4).pack(mav), ("127.0.0.1", emulator.port))
+        emulator.admit(1, timeout=2.0)
+        assert emulator.poll(0.0) == 1 and emulator.poll(0.0) == 0  # the other three wait in the socket
+        emulator.admit(3, timeout=2.0)
+        assert emulator.poll(0.0) == 2 and emulator.counters.datagrams == 3 and emulator.admitted_datagrams == 3
+        with pytest.raises(TimeoutError, match="uav1's PX4 emulator: 4 of the 5 datagrams"):
+            emulator.admit(5, timeout=0.1)  # the fourth is there, the fifth was never sent
+        assert emulator.sent_datagrams == 0
+        emulator.send_status(12.0, 0.9, 1.0)  # to its partner, the client that talked first: one datagram each
+        assert emulator.sent_datagrams >= 1
+        for _ in range(emulator.sent_datagrams):
+            assert client.recvfrom(4096)[1][1] == emulator.port
+        client.setblocking(False)
+        with pytest.raises(BlockingIOError):
+            client.recvfrom(4096)
+    finally:
+        emulator.close()
+        client.close()
