@@ -12,9 +12,11 @@ The schedule, per /clock period k (T_k = k x the /clock period):
   into each emulator exactly the datagrams the graph's bridges had sent by then (``Px4Emulator.admit``): what
   arrives early waits in the socket;
 - the **graph process** takes period message k, publishes its messages from a stand-in ``simulator`` node (in
-  process, :mod:`fpr_experiments.intra_process`), drains the graph, lets each bridge read exactly the telemetry
-  datagrams of period k (``MavlinkLink.receive_limit``), drains again (the controllers compute on T_k) and
-  acknowledges period k with each bridge's count of datagrams sent.
+  process, :mod:`fpr_experiments.intra_process`), drains the graph (the controllers compute on T_k, the bridges
+  send their setpoints) and acknowledges period k with each bridge's count of datagrams sent; then, while the
+  simulator already steps on, it lets each bridge read exactly the telemetry datagrams of period k
+  (``MavlinkLink.receive_limit``) and drains again. A datagram a bridge sends while it handles telemetry (a
+  command after a COMMAND_ACK) counts in the next acknowledgement.
 
 So the simulator steps period k+1 while the graph drains period k, and the setpoints the controllers compute on
 /clock T_k reach the emulators before step k+2: they act from T_(k+1), one /clock period (10 ms at the default
@@ -213,12 +215,12 @@ class OverlappedGraph(InProcessGraph):
         for bridge, sent in zip(bridges, stand_in.sent, strict=True):
             if bridge is not None:
                 bridge.link.receive_limit = sent
-        self.drain()
+        self.drain()  # the controllers compute on this /clock, the bridges send the setpoints
+        stand_in.acknowledge([bridge.link.counters.tx_frames if bridge is not None else 0 for bridge in bridges])
         for bridge, sent in zip(bridges, stand_in.sent, strict=True):
             if bridge is not None:
                 _read_datagrams(bridge, sent)
         self.drain()
-        stand_in.acknowledge([bridge.link.counters.tx_frames if bridge is not None else 0 for bridge in bridges])
 
     @property
     def simulator_cpu(self) -> float:
