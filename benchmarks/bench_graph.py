@@ -8,8 +8,9 @@ n = 6, ``--seconds`` simulated from the start (default 12). Run on a quiet machi
 
     bash scripts/isolated.sh python benchmarks/bench_graph.py [--seconds 12] [--cases n3_emulated,n3_images]
 
-Prints one line per case (wall, CPU, RTF, lockstep timeouts, the executor's entity count, the machine's load
-average before and after) and the ratios of each lever against the baseline of its case.
+Prints one line per case (wall, CPU, RTF, the controllers' step in the graph: median and 95th percentile of their
+50 Hz timer callback, lockstep timeouts, the executor's entity count, the machine's load average before and after)
+and the ratios of each lever against the baseline of its case.
 
 ``--overlap`` compares issue 15's overlapped two-process layout (fpr_experiments.overlapped: the simulator in a
 process of its own, one /clock period ahead of the graph) with what it could give at best: the default runner is
@@ -24,6 +25,7 @@ one-process runner. The lever "overlapped layout" flies it among the others.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import resource
 import time
@@ -100,6 +102,30 @@ def _entities(graph: InProcessGraph) -> int:
     return total
 
 
+def _time_controller_ticks(graph) -> list[float]:
+    """Wall time [s] of every controller's 50 Hz step in the graph (the node's timer callback: ζ book-keeping,
+    state reconstruction, model, observer, law, thrust distribution, the setpoint message; in-process delivery
+    only queues it), appended to the returned list as the flight runs."""
+    ticks: list[float] = []
+    for spec, node in zip(graph.specs, graph.nodes, strict=True):
+        if spec.executable != "controller":
+            continue
+        for timer in node.timers:
+            if timer.callback == node._on_tick:
+                timer.callback = _timed(timer.callback, ticks)
+    return ticks
+
+
+def _timed(callback, times: list[float]):
+    def timed(*args):
+        start = time.perf_counter()
+        try:
+            return callback(*args)
+        finally:
+            times.append(time.perf_counter() - start)
+    return timed
+
+
 def overlap_bound(period_costs: list[tuple[float, float, float]], control_rate: float = 50.0,
                   lag: int = 0) -> float:
     """Speed-up bound of running the simulator and the graph in two processes: ``period_costs`` = (simulation
@@ -152,6 +178,7 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
                             executor=executor if deterministic else None,
                             measure_periods=measure_periods)) as graph:
         graph.wait_for_discovery()
+        ticks = _time_controller_ticks(graph)
         entities = _entities(graph)
         wall, cpu = time.monotonic(), _cpu()
         graph.run_until(lambda: graph.sim_time >= seconds - 1e-9, wall_timeout=60.0 + 60.0 * seconds)
@@ -161,7 +188,10 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
         simulated = graph.sim_time
         timeouts = graph.lockstep_timeouts
         period_costs = list(graph.period_costs)
+    ticks_us = sorted(1e6 * t for t in ticks)
     return {"period_costs": period_costs,
+            "tick_median_us": ticks_us[len(ticks_us) // 2] if ticks_us else math.nan,
+            "tick_p95_us": ticks_us[int(0.95 * (len(ticks_us) - 1))] if ticks_us else math.nan,
             "case": case, "lean": lean, "clock_rate": clock_rate, "simulated": simulated, "wall": wall, "cpu": cpu,
             "rtf": simulated / wall, "cpu_per_sim_s": cpu / simulated, "timeouts": timeouts, "entities": entities,
             "load": (load_before, os.getloadavg()[0])}
@@ -194,6 +224,7 @@ def main() -> None:
             baseline = baseline or r
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
                   f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
+                  f"controller step {r['tick_median_us']:4.0f} us (p95 {r['tick_p95_us']:4.0f})  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
                   flush=True)
 

@@ -35,12 +35,25 @@ def test_rows_ratios_bands_orderings_and_checks(tmp_path):
     assert set(rows) == {"roll", "pitch", "legs"}  # only_here is not in both
     assert rows["roll"]["ratio"] == pytest.approx(1.25) and rows["legs"]["ratio"] is None
     assert rows["pitch"]["reference_in_band"] is False and rows["pitch"]["other_in_band"] is True  # 1/4, 3/4
-    text = report(reference, other, ("one process", "overlapped"), "compare_runs one two")
-    assert "within ×0.5-×2 of the thesis: one process 1 / 2, overlapped 2 / 2; in band in one run only: 1" in text
+    text = report(reference, other, ("one process", "overlapped"), "compare_runs one two", intro="Both: run all.")
+    assert "\n\nBoth: run all.\n\n" in text and "runner one process, seed own, commit abc1234" in text
+    assert ": one process 1 / 2, overlapped 2 / 2; in band in one run only: 1" in text
+    assert "the thesis's claims holding: one process 0 / 0" in text
     assert "thesis orderings reproduced: one process 1 / 1, overlapped 0 / 1" in text
     assert "table_4_2 / C-controller: one process: ok — overlapped: max_tilt 40 > 30" in text
     assert "| table_4_2 | C-controller | pitch [deg] | 1 | 3 | 3 | 4 |" in text
     assert "runner overlapped (two processes)" in text
+
+
+def test_calibration_rows_are_left_out_of_the_band_counts(tmp_path):
+    one = tmp_path / "one"
+    summary = _summary({"roll": 4.0}, True)
+    summary["variants"] = {"impedance": summary["variants"]["c"]}
+    _write(one, "table_3_2", summary)  # Table 3.2's impedance row: a calibration row (fpr_experiments.calibration)
+    run = load_run(str(one))
+    assert metric_rows(run, run)[0]["calibration"]
+    assert "table_4_2/communicating left out, as in docs/results.md): reference 0 / 0" in report(run, run, ("reference",
+                                                                                                      "other"), "c")
 
 
 def test_main_writes_the_report_and_refuses_an_empty_root(tmp_path, capsys):
