@@ -43,10 +43,12 @@ from __future__ import annotations
 import importlib
 import os
 import pickle
+import queue
 import select
 import socket
 import subprocess
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Sequence
@@ -103,7 +105,14 @@ class SimulatorStandIn(Node):
         self.process = subprocess.Popen([sys.executable, "-m", "fpr_experiments.overlapped"], env=environment,
                                         pass_fds=(theirs.fileno(),))
         theirs.close()
-        self.connection = Connection(ours.detach())
+        self._socket = ours  # shut down at the end, which wakes the reader thread
+        self.connection = Connection(os.dup(ours.fileno()))
+        #: what the simulator process sent, read as soon as it arrives by a thread of its own: a period message
+        #: with camera frames (~1 MB) is larger than the socket's buffer, and the simulator must not wait in its
+        #: send until the graph is ready for that period (None: the connection ended)
+        self._inbox: queue.Queue[bytes | None] = queue.Queue()
+        self._reader = threading.Thread(target=self._read, name="overlapped-reader", daemon=True)
+        self._reader.start()
         try:
             self._send(("spec", spec))
             _, publishers, latched = self._receive(what="its start-up message (the simulator node is built)")
@@ -122,15 +131,28 @@ class SimulatorStandIn(Node):
             raise RuntimeError(f"overlapped layout: the simulator process is gone ({self._exit_text()}): "
                                f"{error}") from None
 
-    def _receive(self, what: str):
-        if not self.connection.poll(self.watchdog):
-            raise RuntimeError(f"overlapped layout: the simulator process (pid {self.process.pid}) sent no "
-                               f"{what} within {self.watchdog:g} s wall ({self._exit_text()})")
+    def _read(self) -> None:
         try:
-            message = pickle.loads(self.connection.recv_bytes())
+            while True:
+                self._inbox.put(self.connection.recv_bytes())
         except (EOFError, OSError):
+            self._inbox.put(None)
+
+    def _receive(self, what: str):
+        try:
+            data = self._inbox.get(timeout=self.watchdog)
+        except queue.Empty:
+            raise RuntimeError(f"overlapped layout: the simulator process (pid {self.process.pid}) sent no "
+                               f"{what} within {self.watchdog:g} s wall ({self._exit_text()})") from None
+        if data is None:
+            self._inbox.put(None)  # for whoever asks next
+            try:
+                self.process.wait(timeout=1.0)
+            except subprocess.TimeoutExpired:
+                pass
             raise RuntimeError(f"overlapped layout: the simulator process ended ({self._exit_text()}) before "
-                               f"{what}") from None
+                               f"{what}")
+        message = pickle.loads(data)
         if message[0] == "error":
             raise RuntimeError(f"overlapped layout: the simulator process failed: {message[1]}")
         return message
@@ -173,7 +195,13 @@ class SimulatorStandIn(Node):
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        try:
+            self._socket.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._reader.join(timeout=5.0)
         self.connection.close()
+        self._socket.close()
         super().destroy_node()
 
 
