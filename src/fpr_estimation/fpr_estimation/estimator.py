@@ -376,10 +376,14 @@ class PoseEstimatorCore:
         delta = self.attitudes.rotation_since(capture_stamp)
         if delta is None:
             self.uncompensated_detections += 1
+            age = latest - capture_stamp
+            horizon = self.config.latency_horizon
+            why = (f"more than latency_horizon {horizon:g} s" if age > horizon else
+                   f"before the oldest IMU attitude kept, {latest - self.attitudes.oldest_stamp:.3f} s of history: "
+                   "the IMU stream started or resumed after the capture")
             self._emit("latency", "warning",
-                       f"detection captured {latest - capture_stamp:.3f} s before the filter's time (more than "
-                       f"latency_horizon {self.config.latency_horizon:g} s): applied without latency compensation "
-                       f"({self.uncompensated_detections} so far)")
+                       f"detection captured {age:.3f} s before the filter's time ({why}): applied without latency "
+                       f"compensation ({self.uncompensated_detections} so far)")
             return rotation
         self.compensated_detections += 1
         self.last_latency = max(latest - capture_stamp, 0.0)

@@ -43,6 +43,10 @@ class AttitudeHistory:
     def latest_stamp(self) -> float | None:
         return self._samples[-1][0] if self._samples else None
 
+    @property
+    def oldest_stamp(self) -> float | None:
+        return self._samples[0][0] if self._samples else None
+
     def clear(self) -> None:
         self._samples.clear()
 

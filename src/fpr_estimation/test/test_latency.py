@@ -112,7 +112,21 @@ def test_a_detection_older_than_the_horizon_is_applied_uncompensated_and_said():
     assert core.uncompensated_detections == 1 and core.compensated_detections == 0
     events = core.take_events()
     assert [e.kind for e in events] == ["latency"] and "without latency compensation" in events[0].message
-    assert "0.200 s before the filter" in events[0].message
+    assert "0.200 s before the filter's time (more than latency_horizon 0.1 s)" in events[0].message
+
+
+def test_a_detection_from_before_the_imu_stream_says_so():
+    """At start-up (or after an IMU gap) the history is younger than the horizon: the detection is older than the
+    first attitude kept, not older than the horizon, and the warning says which."""
+    core = PoseEstimatorCore(EstimatorConfig(latency_horizon=0.5))
+    for k in range(10, 21):
+        core.on_imu(k * IMU_PERIOD, _attitude(k * IMU_PERIOD), np.array([0.0, 0.0, YAW_RATE]))
+    core.take_events()
+    first = 10 * IMU_PERIOD
+    core.on_relative_pose(20 * IMU_PERIOD, _true_relative(first - 0.01), capture_stamp=first - 0.01)
+    assert core.uncompensated_detections == 1
+    message = core.take_events()[0].message
+    assert "before the oldest IMU attitude kept" in message and "latency_horizon" not in message
 
 
 def test_an_imu_gap_forgets_the_attitudes():
