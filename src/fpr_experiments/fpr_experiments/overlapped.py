@@ -1,14 +1,15 @@
 """The overlapped two-process layout (issue 15): the simulator in a process of its own, stepping the next /clock
 period while the graph (every other node, in :class:`~fpr_experiments.inprocess.InProcessGraph`'s deterministic
 runner) works on the previous one. Deterministic: the same scenario and seed give the same ground truth bit for
-bit on an idle or a loaded machine (tests/test_overlapped.py), whatever the two processes' timing.
+bit on an idle or a loaded machine (tests/test_determinism.py), whatever the two processes' timing; its failures
+stop the run with one error each (src/fpr_experiments/test/test_overlapped.py).
 
 The schedule, per /clock period k (T_k = k x the /clock period):
 
 - the **simulator process** steps period k (physics T_(k-1) -> T_k, its PX4 emulators send their telemetry over
   UDP as always) and sends the graph one *period message*: every message the simulator published in the step
-  (serialized: /clock, ground truth, camera frames or marker poses, /tf, ...), T_k, and how many datagrams each
-  emulator has sent so far. Before step k it waits for the graph's *acknowledgement* of period k-2 and admits
+  (the message objects, pickled: /clock, ground truth, camera frames or marker poses, /tf, ...), T_k, and how
+  many datagrams each emulator has sent so far. Before step k it waits for the graph's *acknowledgement* of period k-2 and admits
   into each emulator exactly the datagrams the graph's bridges had sent by then (``Px4Emulator.admit``): what
   arrives early waits in the socket;
 - the **graph process** takes period message k, publishes its messages from a stand-in ``simulator`` node (in
@@ -16,7 +17,9 @@ The schedule, per /clock period k (T_k = k x the /clock period):
   send their setpoints) and acknowledges period k with each bridge's count of datagrams sent; then, while the
   simulator already steps on, it lets each bridge read exactly the telemetry datagrams of period k
   (``MavlinkLink.receive_limit``) and drains again. A datagram a bridge sends while it handles telemetry (a
-  command after a COMMAND_ACK) counts in the next acknowledgement.
+  command after a COMMAND_ACK) counts in the next acknowledgement. A thread of the graph process reads the
+  period messages as they come, so the simulator never waits in its send (a camera period's ~1 MB is larger
+  than the socket's buffer).
 
 So the simulator steps period k+1 while the graph drains period k, and the setpoints the controllers compute on
 /clock T_k reach the emulators before step k+2: they act from T_(k+1), one /clock period (10 ms at the default
@@ -33,9 +36,10 @@ topic, type and QoS for each of the simulator's, and publishes what the period m
 /tf_static and /robot_description are sent with the start-up message and published once, as the simulator does.
 The processes talk over a socket pair (``multiprocessing.connection``), which stays on this machine.
 
-Limits (refused with a message): the simulator's lockstep and pacing are off (the period messages are the
-lockstep); PX4 clients other than the graph's bridges (MAVSDK, a GCS) would upset the datagram counts, and
-fault injection needs the one-process or multi-process runner.
+Limits: the simulator's lockstep is off (the period messages are the lockstep); PX4 clients other than the
+graph's bridges (MAVSDK, a GCS) are not supported (they would upset the datagram counts), fault injection needs
+the one-process or multi-process runner, and ``run --processes --overlapped`` is refused. Measured speed: about
+×1.05 with emulated cameras, nothing with images (docs/benchmarks.md).
 """
 
 from __future__ import annotations
