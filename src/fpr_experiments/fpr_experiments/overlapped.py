@@ -9,9 +9,9 @@ The schedule, per /clock period k (T_k = k x the /clock period):
 - the **simulator process** steps period k (physics T_(k-1) -> T_k, its PX4 emulators send their telemetry over
   UDP as always) and sends the graph one *period message*: every message the simulator published in the step
   (the message objects, pickled: /clock, ground truth, camera frames or marker poses, /tf, ...), T_k, and how
-  many datagrams each emulator has sent so far. Before step k it waits for the graph's *acknowledgement* of period k-2 and admits
-  into each emulator exactly the datagrams the graph's bridges had sent by then (``Px4Emulator.admit``): what
-  arrives early waits in the socket;
+  many datagrams each emulator has sent so far. Before step k it waits for the graph's *acknowledgement* of
+  period k-2 and admits into each emulator exactly the datagrams the graph's bridges had sent by then
+  (``Px4Emulator.admit``): what arrives early waits in the socket;
 - the **graph process** takes period message k, publishes its messages from a stand-in ``simulator`` node (in
   process, :mod:`fpr_experiments.intra_process`), drains the graph (the controllers compute on T_k, the bridges
   send their setpoints) and acknowledges period k with each bridge's count of datagrams sent; then, while the
