@@ -123,8 +123,11 @@ def report(reference: dict, other: dict, labels: tuple[str, str], command: str, 
         for ordering in reference[name].get("orderings", []):
             if ordering["metric"] in theirs:
                 orderings.append((name, ordering, theirs[ordering["metric"]]))
-    claims = [(c, d) for name in sorted(set(reference) & set(other))
-              for c, d in zip(reference[name].get("claims", []), other[name].get("claims", []), strict=False)]
+    claims = []  # the same claim (text, thesis line, variant) in both runs
+    for name in sorted(set(reference) & set(other)):
+        theirs = {(c["text"], c.get("line"), c.get("variant")): c for c in other[name].get("claims", [])}
+        claims += [(c, theirs[key]) for c in reference[name].get("claims", [])
+                   if (key := (c["text"], c.get("line"), c.get("variant"))) in theirs]
     lines.append(f"- the thesis's claims holding: {a} {sum(bool(c['holds']) for c, _ in claims)} / {len(claims)}, "
                  f"{b} {sum(bool(d['holds']) for _, d in claims)} / {len(claims)}")
     lines.append(f"- thesis orderings reproduced: {a} {sum(o[1]['reproduced'] for o in orderings)} / {len(orderings)}"

@@ -93,7 +93,6 @@ class SimulatorStandIn(Node):
 
     def __init__(self, spec: NodeSpec, context, watchdog: float = WATCHDOG_S) -> None:
         super().__init__("simulator", context=context, enable_rosout=False, start_parameter_services=False)
-        self.spec = spec
         self.watchdog = watchdog
         self.sim = self._SimulationView()
         self.last_truth_time: float | None = None
@@ -289,7 +288,7 @@ def _simulator_process(connection: Connection) -> None:
             raise RuntimeError(f"the graph process sent no {what} within {WATCHDOG_S:g} s wall")
         return pickle.loads(connection.recv_bytes())
 
-    kind, spec = receive("graph description")
+    _, spec = receive("graph description")
     outbox: list[tuple[str, object]] = []
     original_publish = Publisher.publish
 

@@ -39,6 +39,11 @@ def test_rows_ratios_bands_orderings_and_checks(tmp_path):
     assert "\n\nBoth: run all.\n\n" in text and "runner one process, seed own, commit abc1234" in text
     assert ": one process 1 / 2, overlapped 2 / 2; in band in one run only: 1" in text
     assert "the thesis's claims holding: one process 0 / 0" in text
+    reference["table_4_2"]["claims"] = [{"text": "C < NC", "line": 7, "variant": "C", "holds": True},
+                                        {"text": "only here", "line": 8, "variant": "C", "holds": True}]
+    other["table_4_2"]["claims"] = [{"text": "C < NC", "line": 7, "variant": "C", "holds": False}]
+    assert "claims holding: one process 1 / 1, overlapped 0 / 1" in report(reference, other, ("one process",
+                                                                                              "overlapped"), "c")
     assert "thesis orderings reproduced: one process 1 / 1, overlapped 0 / 1" in text
     assert "table_4_2 / C-controller: one process: ok — overlapped: max_tilt 40 > 30" in text
     assert "| table_4_2 | C-controller | pitch [deg] | 1 | 3 | 3 | 4 |" in text
