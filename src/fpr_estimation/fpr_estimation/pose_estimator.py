@@ -94,7 +94,8 @@ _PARAMETERS = {
     "marker_euler_zxz": ([-0.716, 3.136, 0.837], "[rad] marker ZXZ angles (psi1, phi, psi2), p_T_M"),
     "frame_id": ("", "frame_id of local_state; empty: uav<i>/platform"),
     "publish_tf": (True, "publish the estimate on /tf as body_frame_id -> tf_frame_id (the platform as this UAV "
-                         "estimates it, beside the simulator's true 'platform' in RViz / Foxglove)"),
+                         "estimates it, beside the simulator's true 'platform' in RViz / Foxglove); built only "
+                         "while /tf has a subscriber"),
     "body_frame_id": ("", "parent frame of the estimate's TF: this UAV's body; empty: uav<i>/base_link"),
     "tf_frame_id": ("", "child frame of the estimate's TF; empty: uav<i>/platform_estimate"),
     "log_interval": (2.0, "[s] minimum interval between repeated warnings"),
@@ -257,7 +258,7 @@ class PoseEstimatorNode(Node):
         msg.valid = bool(valid)
         self._pub.publish(msg)
         self.published += 1
-        if self._tf_pub is not None:
+        if self._tf_pub is not None and self._tf_pub.get_subscription_count() > 0:  # lazy (issue 15)
             self._publish_tf(out.position, out.quaternion, msg.header.stamp)
         self._publish_diagnostics(msg, msg.header.stamp)
 

@@ -31,7 +31,8 @@ the whole suite). The real robot has more than 10 ms of latency between a camera
 What runs where: the simulator process builds the simulator node from its :class:`~fpr_experiments.graph.NodeSpec`
 (the same parameters as in one process) in a ROS domain of its own (the graph's + 1, modulo 101): nothing in it
 is seen by DDS in the graph's domain; every publish of its node is captured (``rclpy.publisher.Publisher.publish``
-replaced in that process only) instead of sent. The graph process's stand-in node has a publisher of the same
+replaced in that process only) instead of sent, and a captured topic counts as subscribed there (the simulator
+builds its lazy /tf whatever the graph listens to). The graph process's stand-in node has a publisher of the same
 topic, type and QoS for each of the simulator's, and publishes what the period message carries; its latched
 /tf_static and /robot_description are sent with the start-up message and published once, as the simulator does.
 The processes talk over a socket pair (``multiprocessing.connection``), which stays on this machine.
@@ -298,7 +299,13 @@ def _simulator_process(connection: Connection) -> None:
         else:
             outbox.append((publisher.topic_name, msg))
 
+    original_count = Publisher.get_subscription_count
+
+    def count(publisher) -> int:  # a captured topic's listeners are in the graph process: build what is due
+        return original_count(publisher) if publisher.topic_name in _LOCAL_TOPICS else 1
+
     Publisher.publish = capture
+    Publisher.get_subscription_count = count
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
     node = build_node(spec, context, lean=True)

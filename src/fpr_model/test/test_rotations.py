@@ -259,8 +259,20 @@ def test_quat_angle_is_the_rotation_angle_between_two_attitudes():
     assert quat_angle(a, b) == pytest.approx(0.7, abs=1e-12)
     assert quat_angle(a, -2.0 * b) == pytest.approx(0.7, abs=1e-12)  # sign- and scale-invariant
     assert quat_angle(a, a) == pytest.approx(0.0, abs=1e-7)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="zero quaternion"):
         quat_angle(a, [0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="q_b: contains NaN"):
+        quat_angle(a, [1.0, float("nan"), 0.0, 0.0])
+    with pytest.raises(ValueError, match="q_a: expected shape"):
+        quat_angle([1.0, 0.0, 0.0], b)
+    with pytest.raises(ValueError, match="q_a: cannot convert"):
+        quat_angle("no quaternion", b)
+    # the float path agrees with the array formula
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        qa, qb = rng.normal(size=4), rng.normal(size=4)
+        expected = 2.0 * np.arccos(min(1.0, abs(qa @ qb) / (np.linalg.norm(qa) * np.linalg.norm(qb))))
+        assert quat_angle(qa, qb) == pytest.approx(expected, abs=1e-12)
 
 
 def test_inverse_pose_composes_to_identity():

@@ -207,6 +207,39 @@ def test_simulator_node_publishes_tf_and_the_robot_description():
         rclpy.shutdown()
 
 
+def test_simulator_builds_tf_only_while_someone_listens(monkeypatch):
+    """/tf is lazy (issue 15): no message is built while /tf has no subscriber; once one joins, every tf_rate
+    instant is published again."""
+    rclpy.init()
+    try:
+        from fpr_sim.simulator import SimulatorNode
+
+        overrides = [Parameter("real_time_factor", value=0.0), Parameter("local_base_port", value=0),
+                     Parameter("remote_base_port", value=0), Parameter("emulated_cameras", value=True)]
+        sim_node = SimulatorNode(parameter_overrides=overrides)
+        built = []
+        original = sim_node._publish_tf
+        monkeypatch.setattr(sim_node, "_publish_tf", lambda: (built.append(sim_node.sim.time), original()))
+        while sim_node.sim.time < 0.3 - 1e-9:
+            sim_node.step()
+        assert built == []
+        from tf2_msgs.msg import TFMessage
+
+        listener = rclpy.create_node("late_tf_listener")
+        listener.create_subscription(TFMessage, "/tf", lambda _: None, 100)
+        deadline = time.monotonic() + 5.0
+        while sim_node.tf_pub.get_subscription_count() == 0:
+            time.sleep(0.01)
+            assert time.monotonic() < deadline, "discovery timed out"
+        while sim_node.sim.time < 0.6 - 1e-9:
+            sim_node.step()
+        assert built == pytest.approx([0.32 + 0.02 * k for k in range(15)])  # every 50 Hz instant after it joined
+        listener.destroy_node()
+        sim_node.destroy_node()
+    finally:
+        rclpy.shutdown()
+
+
 def test_a_waiting_lockstep_keeps_the_mavlink_links_alive():
     """While the lockstep waits for a setpoint, /clock is repeated every CLOCK_REPEAT_S of wall time and every
     emulated PX4 sends a HEARTBEAT with it: a live simulator is never silent for the bridges' wall watchdog
