@@ -111,7 +111,11 @@ class SecondOrderWrenchObserver(WrenchObserver):
     def update(self, momentum, beta, dt):
         momentum = np.asarray(momentum, dtype=float)
         if not self.initialized:
-            self._initial_momentum = momentum.copy()
+            # the kept estimate is this observer's rest state only with the residual that holds it, τ̂ = K_O2 r
+            # (3.13): start r there (P_0 = P − τ̂ / K_O2, I = 0); r = 0 would pull τ̂ to zero at the rate K_O1 and
+            # let it converge back, a transient the law feels as a step of its disturbance compensation
+            self._initial_momentum = momentum - np.divide(self.estimate, self.gain2, out=np.zeros(self.size),
+                                                          where=self.gain2 != 0.0)
             self._integral = np.zeros(self.size)
             self.initialized = True
             return self.estimate.copy()

@@ -93,6 +93,29 @@ def test_sowo_second_order_response(exact_histories):
     assert abs(fz[-1] + 2.0) < 0.02
 
 
+@pytest.mark.parametrize("kind", ["fowo", "sowo", "smwo"])
+def test_a_reset_that_keeps_the_estimate_keeps_it(kind):
+    """reset() forgets the momentum history and keeps τ̂ (the controller's rejoin after setpoints not flown, the
+    NC pause): with the same constant τ_e before and after, the estimate must stay where it was. SOWO's rest state
+    holds τ̂ = K_O2 r (3.13); restarting its residual r at 0 pulled τ̂ towards 0 at the rate K_O1 before it
+    converged back (here the estimate moved by up to 1.48 of its 2.0)."""
+    observer = make_observer(kind, ObserverGains(), 3)
+    tau_e = np.array([0.5, -1.0, -2.0, 0.3, -0.2, 0.1, 0.2, -0.1, 0.05])
+    beta = np.full(9, 0.7) - tau_e  # Ṗ = β + τ_e = 0.7 per element: a moving robot
+    momentum = np.zeros(9)
+    for _ in range(int(round(20.0 / DT))):
+        observer.update(momentum, beta, DT)
+        momentum = momentum + (beta + tau_e) * DT
+    converged = observer.estimate.copy()
+    assert np.abs(converged - tau_e).max() < 0.02
+    observer.reset()
+    worst = 0.0
+    for _ in range(int(round(3.0 / DT))):
+        worst = max(worst, np.abs(observer.update(momentum, beta, DT) - converged).max())
+        momentum = momentum + (beta + tau_e) * DT
+    assert worst < 0.02, f"{kind}: the estimate moved {worst:.3f} after a reset"
+
+
 def test_smwo_converges_in_finite_time(exact_histories):
     """Super-twisting: the estimate reaches the 1 % band and stays there after a finite settling time
     (shorter than the FOWO's 5/K_O = 2.5 s), then holds it (no chattering beyond the band)."""
