@@ -20,6 +20,13 @@ communication cost at all, under the lockstep rule (the simulator passes a contr
 setpoints computed on it) and as the overlapped layout schedules them (every step waits for the drains of the
 period before the last: one period of added latency); then the overlapped layout is flown, interleaved with the
 one-process runner. The lever "overlapped layout" flies it among the others.
+
+The VMs these runs get differ by up to ×2.2 in speed from one session to the next, and one VM's speed drifts by
+up to ×1.5 within minutes (docs/benchmarks.md, 2026-12-07). So every line also gives a speed probe of the machine
+around that run: bench_control's n = 3 communicating controller step (Python and small numpy arrays, as most of the
+graph), 1000 calls timed right before and right after the run (median of each). On the VM of docs/benchmarks.md's
+2026-12-01 controller figures it was :data:`REFERENCE_STEP_US`. It tells whether a run's machine was slow; it does
+not convert an RTF to another machine (on 2026-12-07 the probe and the RTF were not proportional from run to run).
 """
 
 from __future__ import annotations
@@ -83,6 +90,19 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # one /clock period ahead of the graph (its CPU is counted with the graph's)
           "overlapped layout (the simulator in a process of its own)": (True, True, 100.0, "ideal", "sweep", None,
                                                                         "native", "overlapped")}
+
+
+#: [µs] bench_control's n = 3 communicating step, median, on the VM of docs/benchmarks.md's 2026-12-01 figures
+REFERENCE_STEP_US = 264.0
+
+
+def reference_step_us(repeats: int = 1000) -> float:
+    """Median [µs] of bench_control's n = 3 communicating (C) controller step on this machine now."""
+    import bench_control  # this folder is the script's (sys.path[0])
+
+    _, _, _, step = bench_control.setup(3, "communicating")
+    step()
+    return 1e6 * float(bench_control.timeit(step, repeats)[0])
 
 
 def _cpu() -> float:
@@ -214,16 +234,21 @@ def main() -> None:
         levers = [levers[int(k)] for k in args.levers.split(",")]
     print(f"# bench_graph: {args.seconds:.0f} s simulated per run, {os.cpu_count()} cores, load average "
           f"{os.getloadavg()[0]:.2f}", flush=True)
+    print(f"# probe: bench_control's n = 3 C step before / after each run, median of 1000 calls "
+          f"({REFERENCE_STEP_US:.0f} us on the reference VM)", flush=True)
     for case in args.cases.split(","):
         baseline = None
         for name, (deterministic, lean, clock_rate, realism, executor, *extra) in levers:
+            step_before = reference_step_us()
             r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor,
                          node_parameters=extra[0] if extra else None,
                          opencv_dispatch=extra[1] if len(extra) > 1 else "native",
                          layout=extra[2] if len(extra) > 2 else "one process")
+            step_after = reference_step_us()
             baseline = baseline or r
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
-                  f"CPU/sim-s {r['cpu_per_sim_s']:5.2f}  x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
+                  f"probe {step_before:3.0f}/{step_after:3.0f} us  CPU/sim-s {r['cpu_per_sim_s']:5.2f}  "
+                  f"x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
                   f"controller step {r['tick_median_us']:4.0f} us (p95 {r['tick_p95_us']:4.0f})  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
                   flush=True)
