@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from fpr_model._validation import as_angles, as_trailing
-from fpr_model.rotations import _quat_multiply
+from fpr_model.rotations import _hamilton, _quat_multiply
 
 __all__ = [
     "Q_NE",
@@ -50,16 +50,23 @@ R_NE = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 _R_X_PI = np.diag([1.0, -1.0, -1.0])
 
 
+def _swap_world(v) -> np.ndarray:
+    """``(x, y, z) -> (y, x, −z)`` of a validated (..., 3) array; one vector on plain floats (np.stack costs
+    ~7 µs, and the bridges and the emulated PX4s convert every MAVLink frame: issue 15)."""
+    if v.ndim == 1:
+        x, y, z = v.tolist()
+        return np.array([y, x, -z])
+    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+
+
 def enu_to_ned(v) -> np.ndarray:
     """World vector ENU -> NED: ``(x, y, z) -> (y, x, −z)``. ``v`` (..., 3)."""
-    v = as_trailing("v", v, (3,))
-    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+    return _swap_world(as_trailing("v", v, (3,)))
 
 
 def ned_to_enu(v) -> np.ndarray:
     """World vector NED -> ENU: ``(x, y, z) -> (y, x, −z)``. ``v`` (..., 3)."""
-    v = as_trailing("v", v, (3,))
-    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+    return _swap_world(as_trailing("v", v, (3,)))
 
 
 def flu_to_frd(v) -> np.ndarray:
@@ -78,18 +85,31 @@ def _canonical(q: np.ndarray) -> np.ndarray:
     return np.where(q[..., :1] < 0.0, -q, q)
 
 
+_CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+_Q_NE_FLOATS = Q_NE.tolist()
+_Q_X_PI_FLOATS = Q_X_PI.tolist()
+_Q_NE_INVERSE_FLOATS = (Q_NE * _CONJUGATE).tolist()
+_Q_X_PI_INVERSE_FLOATS = (Q_X_PI * _CONJUGATE).tolist()
+
+
+def _sandwich(left: list[float], q: np.ndarray, right: list[float]) -> np.ndarray:
+    """``left ∘ q ∘ right`` with ``w >= 0`` for a validated (..., 4) ``q``: one quaternion on plain floats, the
+    Hamilton products in the same order as the array path (the same bits), ~3× faster (every MAVLink attitude)."""
+    if q.ndim == 1:
+        out = _hamilton(*_hamilton(*left, *q.tolist()), *right)
+        return np.array([-v for v in out] if out[0] < 0.0 else out)
+    return _canonical(_quat_multiply(_quat_multiply(np.array(left), q), np.array(right)))
+
+
 def quat_enu_flu_to_ned_frd(q) -> np.ndarray:
     """Attitude FLU->ENU (ROS) to FRD->NED (PX4): ``q_NE ∘ q ∘ q_x(π)``, returned with ``w >= 0``."""
-    q = as_trailing("q", q, (4,))
-    return _canonical(_quat_multiply(_quat_multiply(Q_NE, q), Q_X_PI))
+    return _sandwich(_Q_NE_FLOATS, as_trailing("q", q, (4,)), _Q_X_PI_FLOATS)
 
 
 def quat_ned_frd_to_enu_flu(q) -> np.ndarray:
     """Attitude FRD->NED (PX4) to FLU->ENU (ROS): ``q_NE^{-1} ∘ q ∘ q_x(π)^{-1}``, returned with ``w >=
     0``."""
-    q = as_trailing("q", q, (4,))
-    conj = np.array([1.0, -1.0, -1.0, -1.0])
-    return _canonical(_quat_multiply(_quat_multiply(Q_NE * conj, q), Q_X_PI * conj))
+    return _sandwich(_Q_NE_INVERSE_FLOATS, as_trailing("q", q, (4,)), _Q_X_PI_INVERSE_FLOATS)
 
 
 def rotmat_enu_flu_to_ned_frd(R) -> np.ndarray:

@@ -70,3 +70,17 @@ def test_bad_input():
         fr.quat_enu_flu_to_ned_frd([1.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="yaw"):
         fr.yaw_enu_to_ned(np.inf)
+
+
+def test_one_vector_gives_the_bits_of_the_batch_path():
+    """The single-vector float paths (issue 15) equal the batched array path bit for bit, signed zeros included."""
+    rng = np.random.default_rng(5)
+    vectors = rng.normal(size=(500, 3)) * 10.0
+    quats = rng.normal(size=(500, 4))
+    quats[::7] *= -1.0
+    quats[3] = [0.0, -0.0, 1.0, -0.0]
+    for convert, batch in ((fr.enu_to_ned, vectors), (fr.ned_to_enu, vectors), (fr.quat_enu_flu_to_ned_frd, quats),
+                           (fr.quat_ned_frd_to_enu_flu, quats)):
+        single = np.array([convert(list(row)) for row in batch])
+        batched = convert(batch)
+        assert single.tobytes() == batched.tobytes(), convert.__name__
