@@ -5,10 +5,11 @@ a singular leg angle, holds without a command) are generated here from fixed see
 ``test_controller_reference.py`` replays exactly the inputs that produced the fixture and compares the outputs.
 
 The fixture ``data/controller_reference.npz`` was recorded with the controller of commit 00348cc (before the
-hot-path optimisation of the "Speed and determinism" issue). Re-record it only on purpose, when the controller's
-results are meant to change:
+hot-path optimisation of the "Speed and determinism" issue); its SOWO cases were re-recorded on 2026-12-07, when
+the SOWO's reset started keeping its estimate (fpr_control.observers). Re-record it only on purpose, when the
+controller's results are meant to change, and only the cases meant to change:
 
-    .venv/bin/python src/fpr_control/test/controller_reference.py      # writes data/controller_reference.npz
+    .venv/bin/python src/fpr_control/test/controller_reference.py [--only _sowo_]  # data/controller_reference.npz
 """
 
 from __future__ import annotations
@@ -169,8 +170,18 @@ def warning_codes(warnings: np.ndarray, table: list[str]) -> np.ndarray:
 
 
 def main() -> None:
+    """Record every case, or with ``--only TEXT`` re-record the cases whose name contains TEXT and keep the
+    others' recorded outputs as they are."""
+    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else None
     arrays, table = {}, [""]
+    if only is not None:
+        with np.load(FIXTURE) as data:
+            kept = {key: data[key] for key in data.files}
+        table = [str(text) for text in kept.pop("warnings")]
+        arrays = {key: value for key, value in kept.items() if only not in key.split("/")[0]}
     for index, name in enumerate(case_names()):
+        if only is not None and only not in name:
+            continue
         n = SIZES[index // len(CASES)]
         fields = record(run_case(index), n)
         flags = fields["flags"]
