@@ -69,9 +69,16 @@ def test_a_node_restarted_within_2_s_rejoins_and_the_robot_holds_hover(node_rest
     assert m["max_thrust_received"] <= 1.0
 
 
-def test_every_bridge_says_the_simulator_died_within_a_second(simulator_killed):
+def test_every_bridge_says_the_simulator_died_once_its_link_is_silent(simulator_killed):
+    """Each bridge's wall watchdog (wall_silence_timeout 0.5 s, checked at 20 Hz) says "PX4 lost" once the last frame
+    it read is 0.5 s old, and every bridge says it within 1 s of the kill on an unloaded machine (measured 0.51-0.55 s).
+    A bridge process held off the CPU reads the frames the simulator sent before dying late, and its silence starts
+    from there: on this project's 2-core CI VM two bridges said it 1.53 s after the kill, each after 0.5 s of
+    silence (2026-12-07). The wall bound from the kill allows such a stall (2.5 s); the silence the bridges report is
+    the watchdog's own timing and has no allowance."""
     m = simulator_killed.metrics
     print(f"\n[faults] {simulator_killed.case.label}: {m}")
     assert [e[0] for e in simulator_killed.events] == ["killed simulator"]
     for uav in (1, 2, 3):
-        assert m[f"link_lost_uav{uav}_s"] < 1.0, uav
+        assert m[f"link_lost_silence_uav{uav}_s"] <= 0.6, uav  # 0.5 s + the 20 Hz check, printed to 0.1 s
+        assert m[f"link_lost_uav{uav}_s"] < 2.5, uav

@@ -21,7 +21,11 @@ Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simu
 
 Killing the ``simulator`` (every emulated PX4 with it) measures instead how fast each bridge says so:
 ``link_lost_s`` the largest, over the UAVs, wall time from the kill to the bridge's "PX4 lost" line
-(:func:`link_loss_delays`; the bridges' wall-clock watchdog, since /clock stops with the simulator).
+(:func:`link_loss_delays`; the bridges' wall-clock watchdog, since /clock stops with the simulator), and
+``link_lost_silence_uav<i>_s`` the silence that line reports: wall time since the last frame the bridge's receive
+thread read. On a loaded machine the two differ: a bridge process held off the CPU reads the datagrams the
+simulator sent before dying up to a second late (seen on a 2-core VM, 2026-12-07: 1.53 s from the kill, 0.5 s of
+silence).
 
 ``ros2 run fpr_experiments faults`` runs a matrix of cases (nodes × restart × seeds) and writes a Markdown table
 (``docs/safety.md``); tests/test_fault_response.py asserts the issue's acceptance on a few of them.
@@ -170,8 +174,10 @@ def run_fault(case: FaultCase, output_dir: str, *, parameters: Mapping[str, Mapp
         if not killed:
             raise RuntimeError(f"{case.label}: the simulator ended before the kill")
         delays = link_loss_delays(os.path.join(output_dir, "logs"), killed[0][2], 3)
+        silences = link_loss_silences(os.path.join(output_dir, "logs"), killed[0][2], 3)
         metrics = {"fault_time_s": float(fault_time), **{f"link_lost_uav{i}_s": d for i, d in delays.items()},
-                   "link_lost_s": max(delays.values())}
+                   "link_lost_s": max(delays.values()),
+                   **{f"link_lost_silence_uav{i}_s": v for i, v in silences.items()}}
         result = FaultResult(case, metrics, events, output_dir, completed, errors)
         _write_result(result)
         return result
@@ -249,23 +255,34 @@ def result_from_folder(folder: str) -> FaultResult:
 
 #: a bridge's wall-watchdog line: ``[WARN] [<epoch s>] [<logger>…px4_bridge]: PX4 lost: …`` (rcutils' default
 #: console format; its stamp is the system clock, whatever the node's ROS clock)
-_LINK_LOST = re.compile(r"^\[WARN\] \[(\d+\.\d+)\] \[[^\]]*uav(\d+)\.px4_bridge\]: PX4 lost")
+_LINK_LOST = re.compile(r"^\[WARN\] \[(\d+\.\d+)\] \[[^\]]*uav(\d+)\.px4_bridge\]: PX4 lost: no MAVLink "
+                        r"frame for (\d+(?:\.\d+)?) s")
 
 
 def link_loss_delays(log_dir: str, kill_wall: float, n: int) -> dict[int, float]:
     """Per UAV: wall seconds from ``kill_wall`` (epoch, ``time.time()``) to its bridge's first "PX4 lost" line
     at or after it in the processes' logs (``log_dir``/*.log); inf where none came."""
-    delays = {i: math.inf for i in range(1, n + 1)}
+    return {uav: delay for uav, (delay, _) in _link_loss_lines(log_dir, kill_wall, n).items()}
+
+
+def link_loss_silences(log_dir: str, kill_wall: float, n: int) -> dict[int, float]:
+    """Per UAV: the silence [s] its bridge's first "PX4 lost" line after ``kill_wall`` reports (inf: none)."""
+    return {uav: silence for uav, (_, silence) in _link_loss_lines(log_dir, kill_wall, n).items()}
+
+
+def _link_loss_lines(log_dir: str, kill_wall: float, n: int) -> dict[int, tuple[float, float]]:
+    lines = {i: (math.inf, math.inf) for i in range(1, n + 1)}
     for name in sorted(os.listdir(log_dir)):
         if not name.endswith(".log"):
             continue
         with open(os.path.join(log_dir, name), encoding="utf-8", errors="replace") as stream:
             for line in stream:
                 match = _LINK_LOST.match(line)
-                if match and float(match.group(1)) >= kill_wall and int(match.group(2)) in delays:
-                    uav = int(match.group(2))
-                    delays[uav] = min(delays[uav], float(match.group(1)) - kill_wall)
-    return delays
+                if match and float(match.group(1)) >= kill_wall and int(match.group(2)) in lines:
+                    uav, delay = int(match.group(2)), float(match.group(1)) - kill_wall
+                    if delay < lines[uav][0]:
+                        lines[uav] = (delay, float(match.group(3)))
+    return lines
 
 
 def fault_metrics(record, px4_log, fault_time: float, landing_gear_height: float) -> dict[str, float]:
