@@ -532,26 +532,12 @@ def quat_angle(q_a, q_b) -> float:
 
     Evaluated on plain floats (every controller checks each received ζ_j with it, 250 times per simulated second
     for n = 6: issue 15); raises ValueError naming the argument for a wrong shape, NaN/inf or a zero quaternion."""
-    aw, ax, ay, az = _single_quat_floats("q_a", q_a)
-    bw, bx, by, bz = _single_quat_floats("q_b", q_b)
+    aw, ax, ay, az = as_array("q_a", q_a, (4,)).tolist()
+    bw, bx, by, bz = as_array("q_b", q_b, (4,)).tolist()
     norms = math.sqrt(aw * aw + ax * ax + ay * ay + az * az) * math.sqrt(bw * bw + bx * bx + by * by + bz * bz)
     if not norms > 0.0:
         raise ValueError("quat_angle: a zero quaternion is no attitude")
     return 2.0 * math.acos(min(1.0, abs(aw * bw + ax * bx + ay * by + az * bz) / norms))
-
-
-def _single_quat_floats(name: str, q) -> list[float]:
-    """One quaternion (shape (4,)) as four finite plain floats; ValueError naming ``name`` otherwise."""
-    try:
-        array = np.asarray(q, dtype=float)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name}: cannot convert to a float array ({error})") from None
-    if array.shape != (4,):
-        raise ValueError(f"{name}: expected shape (4,), got {array.shape}")
-    values = array.tolist()
-    if not all(map(math.isfinite, values)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    return values
 
 
 def quat_error(q, q_des) -> np.ndarray:
