@@ -8,9 +8,11 @@ n = 6, ``--seconds`` simulated from the start (default 12). Run on a quiet machi
 
     bash scripts/isolated.sh python benchmarks/bench_graph.py [--seconds 12] [--cases n3_emulated,n3_images]
 
-Prints one line per case (wall, CPU, RTF, the controllers' step in the graph: median and 95th percentile of their
-50 Hz timer callback, lockstep timeouts, the executor's entity count, the machine's load average before and after)
-and the ratios of each lever against the baseline of its case.
+Prints one line per case (wall, CPU, RTF, CPU per simulated second and, for the deterministic one-process runner,
+its split into the simulator's steps — physics, sensors, rendering, publishing — and the rest of the graph (thread
+CPU time, ``InProcessGraph(measure_periods=True)``), the controllers' step in the graph: median and 95th percentile
+of their 50 Hz timer callback, lockstep timeouts, the executor's entity count, the machine's load average before and
+after) and the ratios of each lever against the baseline of its case.
 
 ``--overlap`` compares issue 15's overlapped two-process layout (fpr_experiments.overlapped: the simulator in a
 process of its own, one /clock period ahead of the graph) with what it could give at best: the default runner is
@@ -240,14 +242,19 @@ def main() -> None:
         baseline = None
         for name, (deterministic, lean, clock_rate, realism, executor, *extra) in levers:
             step_before = reference_step_us()
+            layout = extra[2] if len(extra) > 2 else "one process"
             r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor,
+                         measure_periods=deterministic and layout == "one process",
                          node_parameters=extra[0] if extra else None,
-                         opencv_dispatch=extra[1] if len(extra) > 1 else "native",
-                         layout=extra[2] if len(extra) > 2 else "one process")
+                         opencv_dispatch=extra[1] if len(extra) > 1 else "native", layout=layout)
             step_after = reference_step_us()
             baseline = baseline or r
+            split = ""
+            if r["period_costs"]:  # the simulator's step (physics, sensors, rendering, publishing) and the rest
+                split = (f" (simulator {sum(c[1] for c in r['period_costs']) / r['simulated']:4.2f}, graph "
+                         f"{sum(c[2] for c in r['period_costs']) / r['simulated']:4.2f})")
             print(f"{case:12s} {name:56s} wall {r['wall']:6.1f} s  CPU {r['cpu']:6.1f} s  RTF {r['rtf']:5.2f}  "
-                  f"probe {step_before:3.0f}/{step_after:3.0f} us  CPU/sim-s {r['cpu_per_sim_s']:5.2f}  "
+                  f"probe {step_before:3.0f}/{step_after:3.0f} us  CPU/sim-s {r['cpu_per_sim_s']:5.2f}{split}  "
                   f"x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
                   f"controller step {r['tick_median_us']:4.0f} us (p95 {r['tick_p95_us']:4.0f})  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",

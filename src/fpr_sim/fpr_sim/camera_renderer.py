@@ -12,11 +12,11 @@ corners is behind (or within ``near_clip`` of) the camera, or when its bounding 
 Options: Gaussian blur (σ in px) before Gaussian pixel noise (σ in grey levels); deterministic for a seed.
 Per-frame realism effects (:class:`FrameEffects`, drawn by :mod:`fpr_sim.cameras`), applied in the order light
 meets them: an occluding band over the marker (a leg or its shadow), motion blur along the image motion during
-the exposure (a line kernel on the marker's region only), the optical blur, then the photometric gain, offset and
-lighting gradient together with the sensor noise in one float32 pass. Without effects the image is bit-identical
-to the effect-free renderer. The band and the optical blur work on the region they can change (the rest of the
-frame is the uniform background, which a blur leaves as it is): the same pixels as whole-frame operations
-(``test_render_regions.py`` keeps the former code as its reference).
+the exposure (a line kernel on the marker's region only), the optical blur, then the photometric gain and offset
+(a 256-entry table), the lighting gradient and the sensor noise on float32 grey levels, rounded in place. Without
+effects the image is bit-identical to the effect-free renderer. The band and the optical blur work on the region
+they can change (the rest of the frame is the uniform background, which a blur leaves as it is): the same pixels as
+whole-frame operations (``test_render_regions.py`` keeps the former code as its reference).
 
 :func:`emulate_relative_pose` gives the MOCAP-emulated relative pose of thesis §4.4.1: the true ``p_T_b`` with
 Gaussian noise (default 2 cm and 2° per axis).
@@ -130,7 +130,8 @@ class MarkerRenderer:
         self._K = self.camera.camera_matrix
         self._distorted = self.camera.has_distortion
         self._noise_seed = int(noise_seed)
-        self._noise_bank: np.ndarray | None = None
+        self._noise_bank: np.ndarray | None = None  # scaled by _noise_bank_sigma
+        self._noise_bank_sigma = 0.0
         self._gradient_buffer: np.ndarray | None = None
         self._gradient_axes: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -181,13 +182,14 @@ class MarkerRenderer:
                 image[y0:y1, x0:x1] = cv2.GaussianBlur(image[y0:y1, x0:x1], (0, 0), float(blur_sigma))
         photometric = effects is not None and effects.photometric
         if noise_sigma > 0.0 or photometric:
-            noisy = image.astype(np.float32)
-            if photometric:
-                self._apply_photometric(noisy, effects)
+            noisy = self._photometric(image, effects) if photometric else image.astype(np.float32)
             if noise_sigma > 0.0:
                 rng = rng if rng is not None else np.random.default_rng(0)
-                noisy += np.float32(noise_sigma) * self._noise_patch(rng)
-            image = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+                noisy += self._noise_patch(rng, noise_sigma)
+            # in place: a fresh 1.2 MB array per operation cost its page faults (issue 15)
+            np.rint(noisy, out=noisy)
+            np.clip(noisy, 0, 255, out=noisy)
+            image = noisy.astype(np.uint8)
         return RenderResult(image, drawn, in_view, corners)
 
     def _occlude_and_smear(self, image: np.ndarray, outer_px: np.ndarray,
@@ -226,12 +228,19 @@ class MarkerRenderer:
             touched = _union(touched, (x0, y0, x1, y1))
         return touched
 
-    def _apply_photometric(self, pixels: np.ndarray, effects: FrameEffects) -> None:
-        """In place on float32 grey levels: ``gain·I + offset + a·x̂ + b·ŷ`` (see :class:`FrameEffects`)."""
-        if effects.gain != 1.0:
-            pixels *= np.float32(effects.gain)
-        if effects.offset != 0.0:
-            pixels += np.float32(effects.offset)
+    def _photometric(self, image: np.ndarray, effects: FrameEffects) -> np.ndarray:
+        """The float32 grey levels ``gain·I + offset + a·x̂ + b·ŷ`` of the uint8 ``image`` (see
+        :class:`FrameEffects`). Gain and offset go through a 256-entry table of the same float32 operations
+        (``np.float32(I)·gain + offset``, the same bits as on each pixel) in one pass (cv2.LUT)."""
+        if effects.gain != 1.0 or effects.offset != 0.0:
+            table = np.arange(256, dtype=np.float32)
+            if effects.gain != 1.0:
+                table *= np.float32(effects.gain)
+            if effects.offset != 0.0:
+                table += np.float32(effects.offset)
+            pixels = cv2.LUT(image, table)
+        else:
+            pixels = image.astype(np.float32)
         if effects.gradient is not None and np.any(effects.gradient):
             height, width = pixels.shape
             if self._gradient_buffer is None or self._gradient_buffer.shape != pixels.shape:
@@ -242,14 +251,18 @@ class MarkerRenderer:
             a, b = (np.float32(v) for v in effects.gradient)
             # into a buffer kept from frame to frame: a fresh 1.2 MB array per frame cost its page faults
             pixels += np.add.outer(b * ys, a * xs, out=self._gradient_buffer)
+        return pixels
 
-    def _noise_patch(self, rng: np.random.Generator) -> np.ndarray:
-        """A (height, width) window of unit Gaussian noise at a random offset (drawn from ``rng``) into a fixed
-        bank of 2×2 frames (seeded by ``noise_seed``): 20× cheaper than fresh samples, and deterministic."""
+    def _noise_patch(self, rng: np.random.Generator, sigma: float) -> np.ndarray:
+        """A (height, width) window of Gaussian noise of standard deviation ``sigma`` [grey levels] at a random
+        offset (drawn from ``rng``) into a fixed bank of 2×2 frames of unit samples (seeded by ``noise_seed``)
+        scaled by ``np.float32(sigma)`` once (the same bits as scaling each window): 20× cheaper than fresh
+        samples, and deterministic."""
         height, width = self.camera.height, self.camera.width
-        if self._noise_bank is None:
-            self._noise_bank = np.random.default_rng(self._noise_seed).standard_normal(
+        if self._noise_bank is None or self._noise_bank_sigma != sigma:
+            self._noise_bank = np.float32(sigma) * np.random.default_rng(self._noise_seed).standard_normal(
                 (2 * height, 2 * width), dtype=np.float32)
+            self._noise_bank_sigma = sigma
         y, x = rng.integers(0, height + 1), rng.integers(0, width + 1)
         return self._noise_bank[y:y + height, x:x + width]
 

@@ -135,9 +135,11 @@ class ThrustNoise:
     deterministic with the seed."""
 
     def __init__(self, sigma: float, time_constant: float, dt: float, n: int, seed: int, block: int = 512,
-                 common: float = 0.0) -> None:
+                 common: float = 0.0, gains: list[list[float]] | None = None) -> None:
         self.sigma = float(sigma)
         self.n = n
+        #: (4n,) constant per-rotor factors the samples are multiplied by (the thrust-gain spread), or None
+        self._gains = None if gains is None else np.asarray(gains, dtype=float).reshape(4 * n)
         self._a = math.exp(-float(dt) / float(time_constant))
         self._b = math.sqrt(1.0 - self._a * self._a)
         self._rng = _generator(seed, THRUST_NOISE_SEED_STREAM)
@@ -161,10 +163,13 @@ class ThrustNoise:
         if self._common_rng is not None:
             common, self._xc = self._gauss_markov(self._xc, self._common_rng.standard_normal((self._block, self.n)))
             rows = math.sqrt(1.0 - self.common) * rows + math.sqrt(self.common) * np.repeat(common, 4, axis=1)
-        self._rows = (1.0 + self.sigma * rows).tolist()[::-1]
+        factors = 1.0 + self.sigma * rows
+        if self._gains is not None:
+            factors = self._gains * factors  # the products g_ij (1 + σ ξ_ij) as the plant formed them one by one
+        self._rows = factors.tolist()[::-1]
 
     def next(self) -> list[float]:
-        """The factors ``1 + σ ξ`` (4n, UAV-major) of the next physics step."""
+        """The factors ``1 + σ ξ`` (4n, UAV-major) of the next physics step, times ``gains`` if given."""
         if not self._rows:
             self._refill()
         return self._rows.pop()
@@ -212,7 +217,7 @@ class PlantRealism:
         if self.rotor_gains is not None and all(g == 1.0 for row in self.rotor_gains for g in row):
             self.rotor_gains = None
         self.noise = (ThrustNoise(actuation.thrust_noise, actuation.thrust_noise_time_constant, dt, n, scenario.seed,
-                                  common=actuation.thrust_noise_common)
+                                  common=actuation.thrust_noise_common, gains=self.rotor_gains)
                       if actuation.enabled and actuation.thrust_noise > 0.0 else None)
         self.rotor_radius = float(aero.rotor_radius) if aero.enabled and scenario.ground.enabled else 0.0
         self.rotor_height = float(aero.rotor_height)
@@ -225,20 +230,22 @@ class PlantRealism:
 
     def thrust_factors(self, tip_positions: list[tuple]) -> list[list[float]]:
         """Per-rotor factors (n, 4) of the produced thrust for the step: gain × (1 + σξ) × ground-effect gain of the
-        UAV's rotor height (``tip_positions`` [m] world, the quadrotors' CoMs at the step's start)."""
+        UAV's rotor height (``tip_positions`` [m] world, the quadrotors' CoMs at the step's start). Plain floats,
+        1 kHz: the gains are folded into the noise samples when both are on (the same products)."""
         n = self.n
-        gains = self.rotor_gains
-        noise = self.noise.next() if self.noise is not None else None
+        if self.noise is not None:
+            flat = self.noise.next()
+        elif self.rotor_gains is not None:
+            flat = [g for row in self.rotor_gains for g in row]
+        else:
+            flat = [1.0] * (4 * n)
+        if self.rotor_radius <= 0.0:
+            return [flat[4 * i:4 * i + 4] for i in range(n)]
         out = []
         for i in range(n):
-            row = list(gains[i]) if gains is not None else [1.0, 1.0, 1.0, 1.0]
-            if noise is not None:
-                row = [g * noise[4 * i + j] for j, g in enumerate(row)]
-            if self.rotor_radius > 0.0:
-                gain = ground_effect_gain(tip_positions[i][2] - self.ground_height + self.rotor_height,
-                                          self.rotor_radius, self.min_ratio)
-                row = [g * gain for g in row]
-            out.append(row)
+            gain = ground_effect_gain(tip_positions[i][2] - self.ground_height + self.rotor_height,
+                                      self.rotor_radius, self.min_ratio)
+            out.append([flat[4 * i] * gain, flat[4 * i + 1] * gain, flat[4 * i + 2] * gain, flat[4 * i + 3] * gain])
         return out
 
     def drag_forces(self, quats: list[list[float]], rotors: list[list[float]], factors: list[list[float]] | None,

@@ -202,20 +202,28 @@ class MotionCapture:
             return None
         rng, s = self._noise_rng, truth.state
         n = len(truth.uav_quats)
-        state = replace(s, position=s.position + rng.normal(0.0, c.position_noise, 3),
-                        quat=_perturb(s.quat, rng.normal(0.0, c.attitude_noise, 3)),
-                        leg_angles=s.leg_angles + rng.normal(0.0, c.leg_angle_noise, n),
-                        velocity=s.velocity + rng.normal(0.0, c.velocity_noise, 3),
-                        rate=s.rate + rng.normal(0.0, c.rate_noise, 3),
-                        leg_rates=s.leg_rates + rng.normal(0.0, c.rate_noise, n))
-        uav_quats = np.array([_perturb(q, rng.normal(0.0, c.attitude_noise, 3)) for q in truth.uav_quats])
-        return replace(truth, state=state,
-                       uav_positions=truth.uav_positions + rng.normal(0.0, c.position_noise, (n, 3)),
-                       uav_quats=uav_quats,
-                       uav_velocities=truth.uav_velocities + rng.normal(0.0, c.velocity_noise, (n, 3)))
+        # the draws in their historical order (one stream: the same frames as drawing field by field); the n + 1
+        # attitude perturbations are then evaluated together
+        position = s.position + rng.normal(0.0, c.position_noise, 3)
+        platform_rotvec = rng.normal(0.0, c.attitude_noise, 3)
+        leg_angles = s.leg_angles + rng.normal(0.0, c.leg_angle_noise, n)
+        velocity = s.velocity + rng.normal(0.0, c.velocity_noise, 3)
+        rate = s.rate + rng.normal(0.0, c.rate_noise, 3)
+        leg_rates = s.leg_rates + rng.normal(0.0, c.rate_noise, n)
+        uav_rotvecs = rng.normal(0.0, c.attitude_noise, (n, 3))  # = n draws of 3, UAV after UAV
+        uav_positions = truth.uav_positions + rng.normal(0.0, c.position_noise, (n, 3))
+        uav_velocities = truth.uav_velocities + rng.normal(0.0, c.velocity_noise, (n, 3))
+        quats = _perturb(np.vstack([s.quat, truth.uav_quats]), np.vstack([platform_rotvec, uav_rotvecs]))
+        state = replace(s, position=position, quat=quats[0], leg_angles=leg_angles, velocity=velocity, rate=rate,
+                        leg_rates=leg_rates)
+        return replace(truth, state=state, uav_positions=uav_positions, uav_quats=quats[1:],
+                       uav_velocities=uav_velocities)
 
 
-def _perturb(quat: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
-    """``q ∘ exp(δ)``: a small rotation δ [rad] about the body axes, renormalised."""
-    out = quat_multiply(quat, quat_from_rotvec(rotvec))
-    return out / np.linalg.norm(out)
+def _perturb(quats: np.ndarray, rotvecs: np.ndarray) -> np.ndarray:
+    """``q ∘ exp(δ)``: small rotations δ (3,) or (m, 3) [rad] about the body axes of the attitudes ``quats`` (4,) or
+    (m, 4), renormalised (each row by its own norm, as one quaternion at a time)."""
+    out = quat_multiply(quats, quat_from_rotvec(rotvecs))
+    if out.ndim == 1:
+        return out / np.linalg.norm(out)
+    return np.array([row / np.linalg.norm(row) for row in out])

@@ -1,12 +1,14 @@
 """The renderer's region-restricted effects (issue 11's cost of the hardware profile) give the same pixels as the
 whole-frame operations they replace: the optical blur on the marker's region only, the occluding band rasterised
-on its own bounding box, the lighting gradient into a kept buffer. The reference below is the former code."""
+on its own bounding box, the grey-level pass (gain and offset through a table, the lighting gradient into a
+kept buffer, the noise bank scaled once, in place). The reference below is the former code."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
+from fpr_model.calibration import CameraModel
 from fpr_sim.camera_renderer import FrameEffects, MarkerRenderer
 
 
@@ -66,17 +68,48 @@ def test_regions_give_the_pixels_of_the_whole_frame_operations(blur_sigma):
     assert drawn > 60 and occluded > 30 and compared == 150  # the cases above were exercised
 
 
-def test_the_lighting_gradient_kept_buffer_gives_the_former_sums():
-    renderer = MarkerRenderer()
-    rng = np.random.default_rng(2)
-    for shape in ((480, 640), (480, 640), (240, 320)):
-        pixels = rng.uniform(0.0, 255.0, shape).astype(np.float32)
-        effects = FrameEffects(gain=1.1, offset=-3.0, gradient=rng.normal(0.0, 30.0, 2))
-        height, width = shape
+def _former_photometric_and_noise(image: np.ndarray, effects: FrameEffects, noise_sigma: float, noise_seed: int,
+                                  rng: np.random.Generator) -> np.ndarray:
+    """fpr_sim.camera_renderer's grey-level pass before 2026-12-07: whole-frame float32 operations, one after the
+    other (gain, offset, the lighting gradient, σ × a window of the unit noise bank, rint, clip)."""
+    height, width = image.shape
+    noisy = image.astype(np.float32)
+    if effects.gain != 1.0:
+        noisy *= np.float32(effects.gain)
+    if effects.offset != 0.0:
+        noisy += np.float32(effects.offset)
+    if effects.gradient is not None and np.any(effects.gradient):
         xs = (np.arange(width, dtype=np.float32) - 0.5 * width) / width
         ys = (np.arange(height, dtype=np.float32) - 0.5 * height) / height
         a, b = (np.float32(v) for v in effects.gradient)
-        expected = pixels * np.float32(1.1) + np.float32(-3.0)
-        expected += np.add.outer(b * ys, a * xs)
-        renderer._apply_photometric(pixels, effects)
-        assert pixels.tobytes() == expected.tobytes()
+        noisy += np.add.outer(b * ys, a * xs)
+    if noise_sigma > 0.0:
+        bank = np.random.default_rng(noise_seed).standard_normal((2 * height, 2 * width), dtype=np.float32)
+        y, x = rng.integers(0, height + 1), rng.integers(0, width + 1)
+        noisy += np.float32(noise_sigma) * bank[y:y + height, x:x + width]
+    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+
+
+def test_the_grey_level_pass_gives_the_former_pixels():
+    """Gain and offset through a table, the gradient into a kept buffer, the noise bank scaled once, rint and clip
+    in place: the bytes of the former whole-frame operations, for frames of two sizes and a change of σ."""
+    rng = np.random.default_rng(2)
+    for width, height in ((640, 480), (320, 240)):
+        renderer = MarkerRenderer(camera=CameraModel(fx=300.0, fy=300.0, cx=width / 2, cy=height / 2, width=width,
+                                                     height=height)) if width != 640 else MarkerRenderer()
+        assert (renderer.camera.width, renderer.camera.height) == (width, height)
+        for k in range(12):
+            T = _random_pose(rng)
+            effects = FrameEffects(gain=float(rng.choice([1.0, rng.uniform(0.5, 1.6)])),
+                                   offset=float(rng.choice([0.0, rng.uniform(-40.0, 40.0)])),
+                                   gradient=rng.normal(0.0, 30.0, 2) if k % 3 else None)
+            sigma = 2.0 if k < 8 else 3.5  # a change of σ rebuilds the scaled bank
+            seed = int(rng.integers(1 << 30))
+            frame = renderer.render(T, noise_sigma=sigma, rng=np.random.default_rng(seed), effects=effects)
+            plain = renderer.render(T).image
+            expected = _former_photometric_and_noise(plain, effects, sigma, renderer._noise_seed,
+                                                     np.random.default_rng(seed))
+            assert frame.image.tobytes() == expected.tobytes()
+            # photometric changes without noise too
+            frame = renderer.render(T, effects=effects)
+            assert frame.image.tobytes() == _former_photometric_and_noise(plain, effects, 0.0, 0, rng).tobytes()
