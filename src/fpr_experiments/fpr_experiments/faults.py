@@ -329,13 +329,15 @@ def format_table(results: Sequence[FaultResult]) -> str:
     results = [r for r in results if r.case.node != "simulator"]
     simulator_table = ""
     if killed_simulator:
-        rows = ["| simulator killed at [s] | seed | " + " | ".join(f"uav{i} says PX4 lost after [s wall]"
+        rows = ["| simulator killed at [s] | seed | " + " | ".join(f"uav{i} says PX4 lost after [s wall] (silence [s])"
                                                                    for i in range(1, 4)) + " |",
                 "|---|---|---|---|---|"]
         for result in killed_simulator:
             m = result.metrics
             rows.append(f"| {m['fault_time_s']:.2f} | {result.case.seed} | "
-                        + " | ".join(f"{m.get(f'link_lost_uav{i}_s', math.inf):.2f}" for i in range(1, 4)) + " |")
+                        + " | ".join(f"{m.get(f'link_lost_uav{i}_s', math.inf):.2f} "
+                                     f"({m.get(f'link_lost_silence_uav{i}_s', math.inf):.2f})" for i in range(1, 4))
+                        + " |")
         simulator_table = "\n".join(rows)
         if not results:
             return simulator_table
@@ -461,7 +463,9 @@ def _report(sections, command: str) -> str:
              __doc__.split("\n\n", 1)[1].split("``ros2 run")[0].strip(), "",
              "Acceptance (issue 12): platform tilt < 30°, no UAV climbs > 0.5 m above its height at the fault, "
              "every PX4 disarmed within 15 s touching down at < 1 m/s; restarted within 2 s: hover held; simulator "
-             "killed: every bridge says the link is lost within 1 s of wall time.", ""]
+             "killed: every bridge says the link is lost after at most 0.6 s of silence (its 0.5 s watchdog, checked "
+             "at 20 Hz), within 1 s of the kill on an unloaded machine (the test allows 2.5 s for a bridge held off "
+             "the CPU).", ""]
     for alternative, description, results in sections:
         lines += [f"## {alternative}", "", description, "", format_table(results), ""]
     return "\n".join(lines) + "\n"
