@@ -39,6 +39,7 @@ setup(
             'detection_fallback = fpr_experiments.detection_fallback_node:main',
             'calibrate = fpr_experiments.calibration:main',
             'spread = fpr_experiments.spread:main',
+            'margin = fpr_experiments.margin:main',
             'compare_runs = fpr_experiments.compare_runs:main',
             'faults = fpr_experiments.faults:main',
             'security_policy = fpr_experiments.security:main',

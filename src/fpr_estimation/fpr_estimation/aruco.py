@@ -66,6 +66,9 @@ class ArucoConfig:
     #: every side; 0: every frame is searched whole
     roi_margin: float = 0.5
     roi_border: int = 16  #: [px] added to the region of interest's margin on every side
+    #: frames without the marker the last region of interest is still searched first (then the whole frame);
+    #: 0: forgotten at the first frame without the marker
+    roi_hold: int = 10
 
     def __post_init__(self) -> None:
         if self.corner_refinement not in CORNER_REFINEMENT:
@@ -75,6 +78,8 @@ class ArucoConfig:
         if not 0.0 <= self.roi_margin <= 10.0 or not 0 <= self.roi_border <= 10000:
             raise ValueError(f"roi_margin must be in [0, 10] and roi_border in [0, 10000] px, got {self.roi_margin}, "
                              f"{self.roi_border}")
+        if not 0 <= self.roi_hold <= 1000:
+            raise ValueError(f"roi_hold must be in [0, 1000] frames, got {self.roi_hold}")
 
 
 @dataclass
@@ -145,11 +150,13 @@ class ArucoPoseDetector:
         self.roi: tuple[int, int, int, int] | None = None
         self.roi_hits = 0    #: frames whose marker was found in the region of interest
         self.roi_misses = 0  #: frames searched whole after the region of interest came up empty
+        self.frames_without_marker = 0  #: consecutive frames in which the marker was not found (roi_hold)
 
     def reset(self) -> None:
         """Forget the previous pose and region of interest (e.g. after a long loss of the marker)."""
         self.previous_rotation = None
         self.roi = None
+        self.frames_without_marker = 0
 
     def _find(self, image: np.ndarray) -> np.ndarray | None:
         """The configured marker's raw corners in ``image`` (4, 2) [px, OpenCV's convention], or None."""
@@ -173,7 +180,8 @@ class ArucoPoseDetector:
 
     def detect(self, image, camera: CameraModel) -> MarkerObservation | None:
         """Detect the configured marker in a mono8 image; None if it is not found. With ``roi_margin`` > 0 the
-        last detection's region of interest is searched first (module doc).
+        last detection's region of interest is searched first, also for ``roi_hold`` frames after it was last
+        found (module doc).
 
         Raises ValueError for an unusable image (see :func:`validate_mono_image`).
         """
@@ -190,10 +198,13 @@ class ArucoPoseDetector:
                 self.roi_misses += 1
         if corners is None:
             corners = self._find(image)
-        self.roi = None if corners is None or self.config.roi_margin <= 0.0 else \
-            self._region_around(corners, image.shape)
         if corners is None:
+            self.frames_without_marker += 1
+            if self.frames_without_marker > self.config.roi_hold:
+                self.roi = None
             return None
+        self.frames_without_marker = 0
+        self.roi = self._region_around(corners, image.shape) if self.config.roi_margin > 0.0 else None
         if self.config.corner_refinement == "apriltag":
             # OpenCV's AprilTag refinement reports corners with pixel centres at (0.5, 0.5) instead of (0, 0)
             # (AprilRobotics/apriltag#121): measured +0.43 px on both axes against projectPoints of the true

@@ -44,6 +44,8 @@ _PARAMETERS = {
                         "on every side is searched first, the whole frame only when the marker is not there (same "
                         "corners, ~5x less CPU); 0: every frame searched whole", high=10.0),
     "roi_border": Param(16, "[px] added to the region of interest's margin on every side", high=10000),
+    "roi_hold": Param(10, "frames without the marker during which its last region of interest is still searched "
+                      "first (then the whole frame); 0: forgotten at once", high=1000),
     "publish_debug_image": (False, "publish marker/debug_image with the pose axes drawn"),
     "log_interval": (2.0, "[s] minimum interval between repeated warnings"),
 }
@@ -68,7 +70,7 @@ class ArucoDetectorNode(Node):
             min_marker_perimeter_rate=float(p["min_marker_perimeter_rate"]),
             april_tag_min_white_black_diff=int(p["april_tag_min_white_black_diff"]),
             ambiguity_threshold=float(p["ambiguity_threshold"]), roi_margin=float(p["roi_margin"]),
-            roi_border=int(p["roi_border"]))
+            roi_border=int(p["roi_border"]), roi_hold=int(p["roi_hold"]))
         self._detector = ArucoPoseDetector(self._config)
         if apply_opencv_dispatch() != "native":  # simulation: detections the same on every CPU
             self.get_logger().info(f"OpenCV dispatch: baseline ({ENVIRONMENT_VARIABLE}): detections do not depend "

@@ -156,7 +156,7 @@ def _moving_marker(calibration, frames=40, seed=5, noise=2.0):
 def test_region_of_interest_gives_the_whole_frame_s_detection():
     """The region of interest (default) finds the same corners and pose as a whole-frame search of every frame
     (within 1e-3 px), searches most frames in the region only and falls back to the whole frame when the marker
-    jumped out of it; an empty frame forgets the region."""
+    jumped out of it; frames without the marker keep the region ``roi_hold`` frames, then forget it."""
     calibration = VisionCalibration()
     images = _moving_marker(calibration)
     tracking = ArucoPoseDetector()
@@ -174,8 +174,19 @@ def test_region_of_interest_gives_the_whole_frame_s_detection():
     assert tracking.roi_misses == 1 and tracking.roi_hits == len(images) - 2  # the first frame, the jump
     assert whole.roi is None and whole.roi_hits == whole.roi_misses == 0
     empty = np.full_like(images[0], 110)
-    assert tracking.detect(empty, calibration.camera) is None and tracking.roi is None
-    assert tracking.roi_misses == 2
+    held = tracking.roi
+    assert tracking.detect(empty, calibration.camera) is None and tracking.roi == held  # kept: roi_hold
+    assert tracking.roi_misses == 2 and tracking.frames_without_marker == 1
+    # the marker back where it was after a loss: found in the held region, not by a whole-frame search
+    hits = tracking.roi_hits
+    assert tracking.detect(images[-1], calibration.camera) is not None
+    assert tracking.roi_hits == hits + 1 and tracking.frames_without_marker == 0
+    for k in range(tracking.config.roi_hold):
+        assert tracking.detect(empty, calibration.camera) is None and tracking.roi is not None, f"empty frame {k}"
+    assert tracking.detect(empty, calibration.camera) is None and tracking.roi is None  # roi_hold + 1: forgotten
+    forgetful = ArucoPoseDetector(ArucoConfig(roi_hold=0))
+    assert forgetful.detect(images[0], calibration.camera) is not None and forgetful.roi is not None
+    assert forgetful.detect(empty, calibration.camera) is None and forgetful.roi is None
     tracking.detect(images[0], calibration.camera)
     small = images[0][:100, :100]  # a smaller frame than the region was made for: no error
     tracking.detect(small, calibration.camera)
@@ -185,3 +196,6 @@ def test_region_of_interest_settings_are_bounded():
     for bad in ({"roi_margin": -0.1}, {"roi_margin": 11.0}, {"roi_border": -1}):
         with pytest.raises(ValueError, match="roi_margin"):
             ArucoConfig(**bad)
+    for bad in (-1, 1001):
+        with pytest.raises(ValueError, match="roi_hold"):
+            ArucoConfig(roi_hold=bad)

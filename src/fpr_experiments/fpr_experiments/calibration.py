@@ -155,9 +155,13 @@ def _flight_command(experiment: str, variant: str, seed: int, overrides: dict[st
             "--fly-one", payload]
 
 
-def _fly(experiment: str, variant: str, seed: int, overrides: dict[str, Any], output_root: str,
-         domain_id: int) -> dict[str, Any]:
-    """One calibration flight in its own isolated process; returns the variant's metrics.json entry."""
+def fly_isolated(experiment: str, variant: str, seed: int | None, overrides: dict[str, Any], output_root: str,
+                 domain_id: int) -> dict[str, Any]:
+    """One flight of ``variant`` with the hardware profile and the scenario ``overrides`` (nested, as
+    :func:`nested_overrides` gives them; seed None: the scenario's own) in its own process under
+    ``scripts/isolated.sh`` (DDS domain ``domain_id``), its reports in ``output_root/<experiment>/`` (no plots);
+    returns the variant's metrics.json entry (``completed`` False and ``error`` when the process failed). The
+    calibration's flights and fpr_experiments.margin's."""
     env = dict(os.environ, FPR_IN_NETNS="0", ROS_DOMAIN_ID=str(domain_id))
     done = subprocess.run(_flight_command(experiment, variant, seed, overrides, output_root), env=env,
                           capture_output=True, text=True, check=False)
@@ -180,7 +184,7 @@ def make_evaluator(seeds: Sequence[int | None], jobs: int, work_dir: str,
         started = time.monotonic()
         flights = [(experiment, variant, seed) for experiment, variant in cases for seed in seeds]
         with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-            futures = {flight: pool.submit(_fly, *flight, overrides, os.path.join(
+            futures = {flight: pool.submit(fly_isolated, *flight, overrides, os.path.join(
                 work_dir, f"eval{index:03d}", f"{flight[0]}_{'own' if flight[2] is None else flight[2]}"),
                 1 + (index * len(flights) + k) % 100) for k, flight in enumerate(flights)}
         evaluation = Evaluation(assignment)
