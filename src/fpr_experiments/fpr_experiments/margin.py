@@ -16,6 +16,7 @@ for any L; the seeds can::
 
     ros2 run fpr_experiments margin --experiment fig_3_4 --latencies 0 0.01 0.02 --seeds own 1 2 3 --jobs 2
     ros2 run fpr_experiments margin --experiment fig_3_4 ... --report-only   # rebuild from the flights' json
+    ros2 run fpr_experiments margin ... --set actuation.motor_time_constant=0.025   # an ablation on every flight
 
 (through ``bash scripts/latency_margin.sh``: network isolation, DESIGN.md §6). Every flight runs in a process of
 its own under ``scripts/isolated.sh`` (fpr_experiments.calibration's flight worker) and lands in
@@ -149,7 +150,7 @@ def _cell(outcomes: list[tuple[str, Outcome]]) -> str:
 
 
 def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], variants: dict[str, list[str]],
-                    latencies: list[float], seeds: list[str], command: str) -> str:
+                    latencies: list[float], seeds: list[str], command: str, settings: list[str] = ()) -> str:
     """docs/latency_margin.md: per experiment a table, one row per variant, one column per latency, each cell the
     seeds that kept control out of those flown, and when the others lost it."""
     flown = [o for o in outcomes.values() if o.kept is not None]
@@ -165,7 +166,10 @@ def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], var
              "and failed no safety check (tilt, height, excursion, ground contact, NaN, the swarm's emergency "
              "response); for the others, the first instant the swarm entered its emergency response (simulated "
              "time from the start), or the first safety check they failed.", "",
-             f"Seeds: {', '.join(seeds)}. Latencies: {', '.join(latency_label(v) for v in latencies)}.", ""]
+             f"Seeds: {', '.join(seeds)}. Latencies: {', '.join(latency_label(v) for v in latencies)}. "
+             + (f"Scenario overrides in every flight (an ablation, not the profile): {', '.join(settings)}."
+                if settings else "Scenario overrides: none (the hardware profile as docs/results.md flies it)."),
+             ""]
     for experiment in experiments:
         lines += [f"## {experiment}", "",
                   "| variant | " + " | ".join(f"L = {latency_label(v)}" for v in latencies) + " |",
@@ -180,20 +184,33 @@ def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], var
     return "\n".join(lines)
 
 
-def _fly(flight: Flight, output_root: str, domain_id: int) -> Outcome:
+def flight_overrides(latency: float, overrides: dict[str, Any] | None) -> dict[str, Any]:
+    """The scenario overlay of one flight: ``overrides`` (nested, as ``--set`` gives them) with
+    ``px4.command_latency`` set to ``latency`` (ValueError if ``overrides`` sets it too)."""
+    merged = json.loads(json.dumps(overrides or {}))  # a deep copy
+    px4 = merged.setdefault("px4", {})
+    if not isinstance(px4, dict) or "command_latency" in px4:
+        raise ValueError("--set px4.command_latency: the latencies are --latencies")
+    px4["command_latency"] = latency
+    return merged
+
+
+def _fly(flight: Flight, output_root: str, domain_id: int, overrides: dict[str, Any] | None) -> Outcome:
     from fpr_experiments.calibration import fly_isolated
 
     root = flight_root(output_root, flight.latency, flight.seed, flight.variant)
     fly_isolated(flight.experiment, flight.variant, None if flight.seed == "own" else int(flight.seed),
-                 {"px4": {"command_latency": flight.latency}}, root, domain_id)
+                 flight_overrides(flight.latency, overrides), root, domain_id)
     return load_outcomes(output_root, [flight])[flight]
 
 
-def fly_all(flights: list[Flight], output_root: str, jobs: int) -> None:
-    """Fly every flight, ``jobs`` at a time (each in its own isolated process), one line per flight."""
+def fly_all(flights: list[Flight], output_root: str, jobs: int, overrides: dict[str, Any] | None = None) -> None:
+    """Fly every flight with the scenario ``overrides`` (nested), ``jobs`` at a time (each in its own isolated
+    process), one line per flight."""
     started = time.monotonic()
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {pool.submit(_fly, flight, output_root, 1 + k % 100): flight for k, flight in enumerate(flights)}
+        futures = {pool.submit(_fly, flight, output_root, 1 + k % 100, overrides): flight
+                   for k, flight in enumerate(flights)}
         for done, future in enumerate(concurrent.futures.as_completed(futures), start=1):
             flight, outcome = futures[future], future.result()
             verdict = {True: "kept control", False: "LOST control", None: "no result"}[outcome.kept]
@@ -213,6 +230,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="command latencies L [s] (default: %(default)s)")
     parser.add_argument("--seeds", nargs="+", default=list(DEFAULT_SEEDS),
                         help="'own' (each scenario's seed) and/or integers (default: %(default)s)")
+    parser.add_argument("--set", dest="overrides", action="append", default=None, metavar="KEY=VALUE",
+                        help="override one scenario value in every flight (repeatable; dotted key, YAML value), "
+                             "e.g. --set actuation.motor_time_constant=0.025: an ablation of the margin")
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default %(default)s)")
     parser.add_argument("--output-dir", default=None,
                         help="reports root of the flights (default: <$FPR_REPORTS or ./reports>/margin)")
@@ -224,9 +244,12 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     from fpr_experiments.catalog import load_experiment
+    from fpr_experiments.cli import scenario_overrides
     from fpr_experiments.runner import default_output_root
 
     try:
+        overrides = scenario_overrides(args.overrides)
+        flight_overrides(0.0, overrides)  # refuses a --set of the latency itself
         seeds = [seed_label(s) for s in args.seeds]
         latencies = [check_latency(v) for v in args.latencies]
         if len(set(seeds)) != len(seeds) or len(set(latencies)) != len(latencies):
@@ -246,14 +269,16 @@ def main(argv: list[str] | None = None) -> int:
                                                "latency_margin.md")
         command = ("ros2 run fpr_experiments margin" + "".join(f" --experiment {n}" for n in names)
                    + "".join(f" --variant {v}" for v in args.variant or [])
-                   + " --latencies " + " ".join(f"{v:g}" for v in latencies) + " --seeds " + " ".join(seeds))
+                   + " --latencies " + " ".join(f"{v:g}" for v in latencies) + " --seeds " + " ".join(seeds)
+                   + "".join(f" --set {o}" for o in args.overrides or []))
         if not args.report_only:
             print(f"[margin] {len(flights)} flights, {args.jobs} at a time, into {output_root}", flush=True)
-            fly_all(flights, output_root, args.jobs)
+            fly_all(flights, output_root, args.jobs, overrides)
         outcomes = load_outcomes(output_root, flights)
         os.makedirs(os.path.dirname(os.path.abspath(results)), exist_ok=True)
         with open(results, "w", encoding="utf-8") as stream:
-            stream.write(margin_markdown(outcomes, names, variants, latencies, seeds, command))
+            stream.write(margin_markdown(outcomes, names, variants, latencies, seeds, command,
+                                         args.overrides or []))
         print(f"wrote {results}", flush=True)
         return 0
     except (ValueError, FileNotFoundError) as error:  # UnknownNameError is a ValueError

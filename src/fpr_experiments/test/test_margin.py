@@ -63,6 +63,11 @@ def test_the_report_counts_the_seeds_that_kept_control_per_latency(tmp_path):
     assert "| SOWO | **1/2** (lost: own at 10 s) | **0/2** (lost: own at 10 s; 1 at 10 s) |" in text
     assert "| variant | L = 0ms | L = 20ms |" in text
     assert "Flights at commit abc1234; 2026-12-07 07:00 UTC to 2026-12-07 07:00 UTC" in text
+    assert "Scenario overrides: none" in text
+    ablation = margin.margin_markdown(margin.load_outcomes(root, flights), ["table_3_3"],
+                                      {"table_3_3": ["fowo", "sowo"]}, latencies, seeds, "margin --set x.y=1",
+                                      ["actuation.motor_time_constant=0.025"])
+    assert "(an ablation, not the profile): actuation.motor_time_constant=0.025." in ablation
 
 
 def test_the_command_rebuilds_the_report_from_the_flights_and_refuses_bad_values(tmp_path, capsys):
@@ -76,6 +81,18 @@ def test_the_command_rebuilds_the_report_from_the_flights_and_refuses_bad_values
     assert "`ros2 run fpr_experiments margin --experiment fig_3_4 --latencies 0.01 --seeds own`" in text
     for bad in (["--latencies", "-0.01"], ["--latencies", "nan"], ["--latencies", "0.6"], ["--seeds", "one"],
                 ["--seeds", "1", "1"], ["--experiment", "no_such_experiment"],
-                ["--experiment", "table_3_3", "--variant", "no_such_variant"]):
+                ["--experiment", "table_3_3", "--variant", "no_such_variant"],
+                ["--set", "px4.command_latency=0.02"], ["--set", "novalue"]):
         assert margin.main([*bad, "--output-dir", root, "--results", results, "--report-only"]) == 2
     assert "error:" in capsys.readouterr().err
+
+
+def test_every_flight_gets_its_latency_beside_the_ablation_s_overrides():
+    overrides = {"actuation": {"motor_time_constant": 0.025}, "px4": {"offboard_loss_timeout": 0.5}}
+    merged = margin.flight_overrides(0.02, overrides)
+    assert merged == {"actuation": {"motor_time_constant": 0.025},
+                      "px4": {"offboard_loss_timeout": 0.5, "command_latency": 0.02}}
+    assert "command_latency" not in overrides["px4"]  # the caller's overlay is not changed
+    assert margin.flight_overrides(0.0, None) == {"px4": {"command_latency": 0.0}}
+    with pytest.raises(ValueError, match="--latencies"):
+        margin.flight_overrides(0.01, {"px4": {"command_latency": 0.03}})
