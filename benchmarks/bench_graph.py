@@ -91,7 +91,11 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # the overlapped two-process layout (fpr_experiments.overlapped): the simulator in a process of its own,
           # one /clock period ahead of the graph (its CPU is counted with the graph's)
           "overlapped layout (the simulator in a process of its own)": (True, True, 100.0, "ideal", "sweep", None,
-                                                                        "native", "overlapped")}
+                                                                        "native", "overlapped"),
+          # the hardware profile with the ArUco detectors forgetting their region of interest at the first frame
+          # without the marker (before roi_hold; compare with lever 7)
+          "hardware realism, ArUco roi_hold 0": (True, True, 100.0, "hardware", "sweep",
+                                                 {"aruco_detector": {"roi_hold": 0}})}
 
 
 #: [µs] bench_control's n = 3 communicating step, median, on the VM of docs/benchmarks.md's 2026-12-01 figures

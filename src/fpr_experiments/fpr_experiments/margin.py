@@ -90,6 +90,7 @@ class Outcome:
     kept: bool | None
     lost_at: float | None = None
     failures: list[str] = field(default_factory=list)
+    why: str = ""  #: the first emergency's UAV and reason (its bridge's status), "" if none
     label: str = ""  #: the variant's label in the experiment's report
     commit: str = ""  #: the source commit the flight ran (its metrics.json)
     date: str = ""
@@ -107,8 +108,11 @@ def outcome_of(experiment_json: dict[str, Any], variant: str, variant_json: dict
     if not entry.get("completed", False):
         failures = ["did not complete", *failures]
     emergencies = (variant_json or {}).get("emergencies") or []
-    lost_at = min((float(e["t"]) for e in emergencies), default=None)
-    return Outcome(kept=not failures, lost_at=lost_at, failures=failures, label=str(entry.get("label", variant)),
+    first = min(emergencies, key=lambda e: float(e["t"]), default=None)
+    lost_at = None if first is None else float(first["t"])
+    why = "" if first is None else f"uav{first.get('uav', '?')}: {str(first.get('reason', '')).strip()}"
+    return Outcome(kept=not failures, lost_at=lost_at, failures=failures, why=why,
+                   label=str(entry.get("label", variant)),
                    commit=str(experiment_json.get("commit", "unknown")), date=str(experiment_json.get("date", "")))
 
 
@@ -134,6 +138,12 @@ def load_outcomes(output_root: str, flights: list[Flight]) -> dict[Flight, Outco
     return outcomes
 
 
+def _short(text: str, limit: int = 70) -> str:
+    """One line of at most ``limit`` characters (a table cell); '|' would end the cell."""
+    text = " ".join(text.split()).replace("|", "/")
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def _cell(outcomes: list[tuple[str, Outcome]]) -> str:
     """``3/4 (lost: own at 128 s)`` for the seeds of one variant and latency."""
     flown = [(seed, o) for seed, o in outcomes if o.kept is not None]
@@ -145,6 +155,8 @@ def _cell(outcomes: list[tuple[str, Outcome]]) -> str:
         if o.kept:
             continue
         lost.append(f"{seed} at {o.lost_at:.0f} s" if o.lost_at is not None else f"{seed}: {o.failures[0]}")
+        if o.why:
+            lost[-1] += f" ({_short(o.why)})"
     text = f"**{kept}/{len(flown)}**"
     return text + (f" (lost: {'; '.join(lost)})" if lost else "")
 

@@ -42,6 +42,7 @@ def test_a_flight_keeps_control_unless_it_fails_a_safety_check_or_does_not_compl
     outcomes = margin.load_outcomes(root, [calm, slow, flipped, crashed, missing])
     assert outcomes[calm].kept and outcomes[slow].kept and outcomes[calm].lost_at is None
     assert outcomes[flipped].kept is False and outcomes[flipped].lost_at == pytest.approx(128.4)
+    assert outcomes[flipped].why == "uav2: tilt"
     assert outcomes[flipped].failures == ["max_abs_roll_deg = 180 (<= 30): FAILED",
                                           "swarm_emergencies = 1 (<= 0): FAILED"]
     assert outcomes[crashed].kept is False and outcomes[crashed].failures == ["did not complete"]
@@ -60,7 +61,8 @@ def test_the_report_counts_the_seeds_that_kept_control_per_latency(tmp_path):
     text = margin.margin_markdown(margin.load_outcomes(root, flights), ["table_3_3"],
                                   {"table_3_3": ["fowo", "sowo"]}, latencies, seeds, "ros2 run fpr_experiments margin")
     assert "| FOWO | **2/2** | **2/2** |" in text
-    assert "| SOWO | **1/2** (lost: own at 10 s) | **0/2** (lost: own at 10 s; 1 at 10 s) |" in text
+    assert ("| SOWO | **1/2** (lost: own at 10 s (uav2: tilt)) | **0/2** (lost: own at 10 s (uav2: tilt); 1 at 10 s "
+            "(uav2: tilt)) |") in text
     assert "| variant | L = 0ms | L = 20ms |" in text
     assert "Flights at commit abc1234; 2026-12-07 07:00 UTC to 2026-12-07 07:00 UTC" in text
     assert "Scenario overrides: none" in text
