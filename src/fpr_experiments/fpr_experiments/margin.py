@@ -138,12 +138,6 @@ def load_outcomes(output_root: str, flights: list[Flight]) -> dict[Flight, Outco
     return outcomes
 
 
-def _short(text: str, limit: int = 70) -> str:
-    """One line of at most ``limit`` characters (a table cell); '|' would end the cell."""
-    text = " ".join(text.split()).replace("|", "/")
-    return text if len(text) <= limit else text[:limit - 1] + "…"
-
-
 def _cell(outcomes: list[tuple[str, Outcome]]) -> str:
     """``3/4 (lost: own at 128 s)`` for the seeds of one variant and latency."""
     flown = [(seed, o) for seed, o in outcomes if o.kept is not None]
@@ -155,8 +149,6 @@ def _cell(outcomes: list[tuple[str, Outcome]]) -> str:
         if o.kept:
             continue
         lost.append(f"{seed} at {o.lost_at:.0f} s" if o.lost_at is not None else f"{seed}: {o.failures[0]}")
-        if o.why:
-            lost[-1] += f" ({_short(o.why)})"
     text = f"**{kept}/{len(flown)}**"
     return text + (f" (lost: {'; '.join(lost)})" if lost else "")
 
@@ -192,6 +184,15 @@ def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], var
             cells = [_cell([(seed, outcomes.get(Flight(experiment, variant, seed, latency), Outcome(kept=None)))
                             for seed in seeds]) for latency in latencies]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
+        reasons: dict[str, list[str]] = {}
+        for flight, outcome in outcomes.items():
+            if flight.experiment == experiment and outcome.kept is False and outcome.why:
+                label = outcome.label or flight.variant
+                reasons.setdefault(outcome.why, []).append(
+                    f"{label} seed {flight.seed} L = {latency_label(flight.latency)}")
+        if reasons:
+            lines += ["", "Why (the first emergency's UAV and the reason its bridge gave):"]
+            lines += [f"- {why}: {', '.join(sorted(which))}" for why, which in sorted(reasons.items())]
         lines.append("")
     return "\n".join(lines)
 

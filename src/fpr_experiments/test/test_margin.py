@@ -61,8 +61,8 @@ def test_the_report_counts_the_seeds_that_kept_control_per_latency(tmp_path):
     text = margin.margin_markdown(margin.load_outcomes(root, flights), ["table_3_3"],
                                   {"table_3_3": ["fowo", "sowo"]}, latencies, seeds, "ros2 run fpr_experiments margin")
     assert "| FOWO | **2/2** | **2/2** |" in text
-    assert ("| SOWO | **1/2** (lost: own at 10 s (uav2: tilt)) | **0/2** (lost: own at 10 s (uav2: tilt); 1 at 10 s "
-            "(uav2: tilt)) |") in text
+    assert "| SOWO | **1/2** (lost: own at 10 s) | **0/2** (lost: own at 10 s; 1 at 10 s) |" in text
+    assert "- uav2: tilt: SOWO seed 1 L = 20ms, SOWO seed own L = 0ms, SOWO seed own L = 20ms" in text
     assert "| variant | L = 0ms | L = 20ms |" in text
     assert "Flights at commit abc1234; 2026-12-07 07:00 UTC to 2026-12-07 07:00 UTC" in text
     assert "Scenario overrides: none" in text
