@@ -147,23 +147,25 @@ def coordinate_search(knobs: Sequence[Knob], evaluate: Callable[[dict[str, Any]]
 
 
 # ---------------------------------------------------------------------------------------------- flights
-def _flight_command(experiment: str, variant: str, seed: int, overrides: dict[str, Any], output_root: str) -> list[str]:
+def _flight_command(experiment: str, variant: str, seed: int, overrides: dict[str, Any], output_root: str,
+                    parameters: dict[str, dict[str, Any]] | None = None) -> list[str]:
     root = os.environ.get("FPR_ROOT") or os.getcwd()
     payload = json.dumps({"experiment": experiment, "variant": variant, "seed": seed, "overrides": overrides,
-                          "output_root": output_root})
+                          "output_root": output_root, "parameters": parameters or {}})
     return ["bash", os.path.join(root, "scripts", "isolated.sh"), sys.executable, "-m", "fpr_experiments.calibration",
             "--fly-one", payload]
 
 
 def fly_isolated(experiment: str, variant: str, seed: int | None, overrides: dict[str, Any], output_root: str,
-                 domain_id: int) -> dict[str, Any]:
+                 domain_id: int, parameters: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
     """One flight of ``variant`` with the hardware profile and the scenario ``overrides`` (nested, as
-    :func:`nested_overrides` gives them; seed None: the scenario's own) in its own process under
+    :func:`nested_overrides` gives them; seed None: the scenario's own) and the node ``parameters``
+    ({executable: {name: value}}, as ``run --param``; None: none) in its own process under
     ``scripts/isolated.sh`` (DDS domain ``domain_id``), its reports in ``output_root/<experiment>/`` (no plots);
     returns the variant's metrics.json entry (``completed`` False and ``error`` when the process failed). The
     calibration's flights and fpr_experiments.margin's."""
     env = dict(os.environ, FPR_IN_NETNS="0", ROS_DOMAIN_ID=str(domain_id))
-    done = subprocess.run(_flight_command(experiment, variant, seed, overrides, output_root), env=env,
+    done = subprocess.run(_flight_command(experiment, variant, seed, overrides, output_root, parameters), env=env,
                           capture_output=True, text=True, check=False)
     path = os.path.join(output_root, experiment, "metrics.json")
     if done.returncode not in (0, 1) or not os.path.exists(path):
@@ -218,7 +220,8 @@ def fly_one(payload: str) -> int:
     result = run_experiment(job["experiment"], seed=None if job["seed"] is None else int(job["seed"]),
                             variants=[job["variant"]],
                             output_root=job["output_root"], plots=False, log=False, realism="hardware",
-                            scenario_overrides=job["overrides"])
+                            scenario_overrides=job["overrides"],
+                            parameter_overrides=job.get("parameters") or None)
     return 0 if result.passed else 1
 
 

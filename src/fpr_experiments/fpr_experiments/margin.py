@@ -17,6 +17,7 @@ for any L; the seeds can::
     ros2 run fpr_experiments margin --experiment fig_3_4 --latencies 0 0.01 0.02 --seeds own 1 2 3 --jobs 2
     ros2 run fpr_experiments margin --experiment fig_3_4 ... --report-only   # rebuild from the flights' json
     ros2 run fpr_experiments margin ... --set actuation.motor_time_constant=0.025   # an ablation on every flight
+    ros2 run fpr_experiments margin ... --param controller.smwo_epsilon=0.2          # a node parameter likewise
 
 (through ``bash scripts/latency_margin.sh``: network isolation, DESIGN.md §6). Every flight runs in a process of
 its own under ``scripts/isolated.sh`` (fpr_experiments.calibration's flight worker) and lands in
@@ -171,8 +172,9 @@ def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], var
              "response); for the others, the first instant the swarm entered its emergency response (simulated "
              "time from the start), or the first safety check they failed.", "",
              f"Seeds: {', '.join(seeds)}. Latencies: {', '.join(latency_label(v) for v in latencies)}. "
-             + (f"Scenario overrides in every flight (an ablation, not the profile): {', '.join(settings)}."
-                if settings else "Scenario overrides: none (the hardware profile as docs/results.md flies it)."),
+             + (f"Overrides in every flight (an ablation, not the profile nor the nodes' defaults): "
+                f"{', '.join(settings)}." if settings else
+                "Overrides: none (the hardware profile and the nodes' defaults, as docs/results.md flies them)."),
              ""]
     for experiment in experiments:
         lines += [f"## {experiment}", "",
@@ -208,21 +210,23 @@ def flight_overrides(latency: float, overrides: dict[str, Any] | None) -> dict[s
     return merged
 
 
-def _fly(flight: Flight, output_root: str, domain_id: int, overrides: dict[str, Any] | None) -> Outcome:
+def _fly(flight: Flight, output_root: str, domain_id: int, overrides: dict[str, Any] | None,
+         parameters: dict[str, dict[str, Any]] | None) -> Outcome:
     from fpr_experiments.calibration import fly_isolated
 
     root = flight_root(output_root, flight.latency, flight.seed, flight.variant)
     fly_isolated(flight.experiment, flight.variant, None if flight.seed == "own" else int(flight.seed),
-                 flight_overrides(flight.latency, overrides), root, domain_id)
+                 flight_overrides(flight.latency, overrides), root, domain_id, parameters)
     return load_outcomes(output_root, [flight])[flight]
 
 
-def fly_all(flights: list[Flight], output_root: str, jobs: int, overrides: dict[str, Any] | None = None) -> None:
-    """Fly every flight with the scenario ``overrides`` (nested), ``jobs`` at a time (each in its own isolated
-    process), one line per flight."""
+def fly_all(flights: list[Flight], output_root: str, jobs: int, overrides: dict[str, Any] | None = None,
+            parameters: dict[str, dict[str, Any]] | None = None) -> None:
+    """Fly every flight with the scenario ``overrides`` (nested) and node ``parameters``, ``jobs`` at a time
+    (each in its own isolated process), one line per flight."""
     started = time.monotonic()
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {pool.submit(_fly, flight, output_root, 1 + k % 100, overrides): flight
+        futures = {pool.submit(_fly, flight, output_root, 1 + k % 100, overrides, parameters): flight
                    for k, flight in enumerate(flights)}
         for done, future in enumerate(concurrent.futures.as_completed(futures), start=1):
             flight, outcome = futures[future], future.result()
@@ -246,6 +250,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--set", dest="overrides", action="append", default=None, metavar="KEY=VALUE",
                         help="override one scenario value in every flight (repeatable; dotted key, YAML value), "
                              "e.g. --set actuation.motor_time_constant=0.025: an ablation of the margin")
+    parser.add_argument("--param", dest="parameters", action="append", default=None, metavar="EXECUTABLE.NAME=VALUE",
+                        help="override one node parameter of every node of an executable in every flight "
+                             "(repeatable; YAML value), e.g. --param controller.smwo_epsilon=0.2")
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default %(default)s)")
     parser.add_argument("--output-dir", default=None,
                         help="reports root of the flights (default: <$FPR_REPORTS or ./reports>/margin)")
@@ -257,12 +264,13 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     from fpr_experiments.catalog import load_experiment
-    from fpr_experiments.cli import scenario_overrides
+    from fpr_experiments.cli import parameter_overrides, scenario_overrides
     from fpr_experiments.runner import default_output_root
 
     try:
         overrides = scenario_overrides(args.overrides)
         flight_overrides(0.0, overrides)  # refuses a --set of the latency itself
+        parameters = parameter_overrides(args.parameters)
         seeds = [seed_label(s) for s in args.seeds]
         latencies = [check_latency(v) for v in args.latencies]
         if len(set(seeds)) != len(seeds) or len(set(latencies)) != len(latencies):
@@ -283,15 +291,16 @@ def main(argv: list[str] | None = None) -> int:
         command = ("ros2 run fpr_experiments margin" + "".join(f" --experiment {n}" for n in names)
                    + "".join(f" --variant {v}" for v in args.variant or [])
                    + " --latencies " + " ".join(f"{v:g}" for v in latencies) + " --seeds " + " ".join(seeds)
-                   + "".join(f" --set {o}" for o in args.overrides or []))
+                   + "".join(f" --set {o}" for o in args.overrides or [])
+                   + "".join(f" --param {p}" for p in args.parameters or []))
         if not args.report_only:
             print(f"[margin] {len(flights)} flights, {args.jobs} at a time, into {output_root}", flush=True)
-            fly_all(flights, output_root, args.jobs, overrides)
+            fly_all(flights, output_root, args.jobs, overrides, parameters)
         outcomes = load_outcomes(output_root, flights)
         os.makedirs(os.path.dirname(os.path.abspath(results)), exist_ok=True)
         with open(results, "w", encoding="utf-8") as stream:
             stream.write(margin_markdown(outcomes, names, variants, latencies, seeds, command,
-                                         args.overrides or []))
+                                         [*(args.overrides or []), *(args.parameters or [])]))
         print(f"wrote {results}", flush=True)
         return 0
     except (ValueError, FileNotFoundError) as error:  # UnknownNameError is a ValueError

@@ -65,11 +65,11 @@ def test_the_report_counts_the_seeds_that_kept_control_per_latency(tmp_path):
     assert "- uav2: tilt: SOWO seed 1 L = 20ms, SOWO seed own L = 0ms, SOWO seed own L = 20ms" in text
     assert "| variant | L = 0ms | L = 20ms |" in text
     assert "Flights at commit abc1234; 2026-12-07 07:00 UTC to 2026-12-07 07:00 UTC" in text
-    assert "Scenario overrides: none" in text
+    assert "Overrides: none" in text
     ablation = margin.margin_markdown(margin.load_outcomes(root, flights), ["table_3_3"],
                                       {"table_3_3": ["fowo", "sowo"]}, latencies, seeds, "margin --set x.y=1",
                                       ["actuation.motor_time_constant=0.025"])
-    assert "(an ablation, not the profile): actuation.motor_time_constant=0.025." in ablation
+    assert "(an ablation, not the profile nor the nodes' defaults): actuation.motor_time_constant=0.025." in ablation
 
 
 def test_the_command_rebuilds_the_report_from_the_flights_and_refuses_bad_values(tmp_path, capsys):
@@ -84,7 +84,7 @@ def test_the_command_rebuilds_the_report_from_the_flights_and_refuses_bad_values
     for bad in (["--latencies", "-0.01"], ["--latencies", "nan"], ["--latencies", "0.6"], ["--seeds", "one"],
                 ["--seeds", "1", "1"], ["--experiment", "no_such_experiment"],
                 ["--experiment", "table_3_3", "--variant", "no_such_variant"],
-                ["--set", "px4.command_latency=0.02"], ["--set", "novalue"]):
+                ["--set", "px4.command_latency=0.02"], ["--set", "novalue"], ["--param", "nonode.x=1"]):
         assert margin.main([*bad, "--output-dir", root, "--results", results, "--report-only"]) == 2
     assert "error:" in capsys.readouterr().err
 
