@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import copy
 import json
 import math
 import os
@@ -37,22 +38,14 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from fpr_experiments.spread import seed_label
+
 #: seeds flown when none are given: docs/results.md's flight and three others
 DEFAULT_SEEDS = ("own", "1", "2", "3")
 #: [s] command latencies flown when none are given
 DEFAULT_LATENCIES = (0.0, 0.01, 0.02)
 #: experiments flown when none are given: the Ch. 3 flights whose margin the fpr_sim README discusses
 DEFAULT_EXPERIMENTS = ("fig_3_4", "table_3_3")
-
-
-def seed_label(seed: str) -> str:
-    """``own`` or an integer seed, as the directories and the tables name it; ValueError otherwise."""
-    if seed == "own":
-        return seed
-    try:
-        return str(int(seed))
-    except ValueError:
-        raise ValueError(f"--seeds: '{seed}' is neither 'own' nor an integer") from None
 
 
 def latency_label(latency: float) -> str:
@@ -202,7 +195,7 @@ def margin_markdown(outcomes: dict[Flight, Outcome], experiments: list[str], var
 def flight_overrides(latency: float, overrides: dict[str, Any] | None) -> dict[str, Any]:
     """The scenario overlay of one flight: ``overrides`` (nested, as ``--set`` gives them) with
     ``px4.command_latency`` set to ``latency`` (ValueError if ``overrides`` sets it too)."""
-    merged = json.loads(json.dumps(overrides or {}))  # a deep copy
+    merged = copy.deepcopy(overrides or {})
     px4 = merged.setdefault("px4", {})
     if not isinstance(px4, dict) or "command_latency" in px4:
         raise ValueError("--set px4.command_latency: the latencies are --latencies")
