@@ -7,7 +7,9 @@ The flight: the ``hover`` scenario (armed in OFFBOARD at 1.5 m, legs 45°), the 
 process per UAV, ground, simulator) except that the victim node runs in a process of its own, so that it can
 die alone (SIGKILL: no clean shutdown, as a crash). Lockstep with ``lockstep_on_timeout: continue`` and a 0.3 s
 watchdog: a dead stream is waited for once, then the simulation flies on without it (PX4's failsafes play out in
-simulation time).
+simulation time). A restart holds the world (the simulator paused) while the new process starts: the node is back
+``restart_after`` s of simulation time after the kill, however long its start-up takes on the machine
+(fpr_experiments.processes.ProcessFault).
 
 Metrics (:func:`fault_metrics`), all after the fault instant t_f (the kill, simulation time):
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import threading
 import time
@@ -23,6 +24,11 @@ from fpr_experiments.recording import Topic
 READY_TIMEOUT = 120.0
 #: [s] wall: how long the other processes keep running after a fault killed the simulator
 SIMULATOR_LINGER = 3.0
+#: [s] wall: from a restarted process's discovery (its /clock subscription seen) to the simulation's resume: the
+#: matching of its other endpoints
+RESTART_SETTLE = 0.5
+#: [s] wall: the simulation resumes anyway this long after a restart (a process that never comes up)
+RESTART_HOLD_LIMIT = 60.0
 _TIMEOUTS = re.compile(r"lockstep timeouts: (\d+)")
 _TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
 
@@ -63,7 +69,14 @@ class _Process:
 class ProcessFault:
     """Fault injection (issue 12): SIGKILL the process of ``group`` (a crash: no clean shutdown) once the
     simulation reaches ``at`` [s]; with ``restart_after`` [s of simulation time after the kill], start the same
-    command again (a supervisor restarting the node, e.g. systemd's ``Restart=on-failure``). ``group``
+    command again (a supervisor restarting the node, e.g. systemd's ``Restart=on-failure``) and hold the simulation
+    (SIGUSR1 / SIGUSR2, fpr_sim's ``SimulatorNode.hold_paused``) until the new process said READY, the graph shows a
+    ``/clock`` subscription that was not there before (the new participant discovered: every node of a group runs on
+    simulated time) and ``RESTART_SETTLE`` wall seconds more passed for its other endpoints' matching:
+    ``restart_after`` is when the node is back, and its start-up costs no simulation time. Without the hold, a
+    start-up of 2-4 wall s on a loaded 2-core machine (python imports, rclpy, discovery) cost 1-2 s of simulation at
+    real_time_factor 0.5, and whether the restarted node rejoined before its bridge's 5 s Hold ran out depended on
+    the machine (a CI run, 2026-12-07). ``group``
     "simulator" kills the simulator (no restart: the run ends ``SIMULATOR_LINGER`` wall seconds later, the other
     processes still running, so that their reaction to the lost PX4s can be read from their logs)."""
 
@@ -76,7 +89,8 @@ class _FaultInjector:
     """Applies :class:`ProcessFault` s from the runner's polling loop; ``events`` lists (what, sim time, wall),
     wall as ``time.time()`` (the epoch seconds of the ROS log lines' stamps)."""
 
-    def __init__(self, faults: Sequence[ProcessFault], processes: dict, commands: dict, log_dir: str) -> None:
+    def __init__(self, faults: Sequence[ProcessFault], processes: dict, commands: dict, log_dir: str,
+                 graph_node=None) -> None:
         unknown = sorted({f.group for f in faults} - set(commands) - {"simulator"})
         if unknown:
             raise ValueError(f"fault for unknown process group(s) {unknown}; groups: {', '.join(commands)}, "
@@ -87,6 +101,10 @@ class _FaultInjector:
         self.restarts: list[tuple[float, ProcessFault]] = []
         self.processes, self.commands, self.log_dir = processes, commands, log_dir
         self.events: list[tuple[str, float, float]] = []
+        #: restarted processes the simulation is held for: [process, /clock subscriptions before it, wall time of
+        #: the spawn, wall time it was seen up or None]
+        self.starting: list[list] = []
+        self.graph_node = graph_node  #: a node of the runner's, for the graph (the /clock subscriptions)
 
     def __call__(self, sim_time: float) -> None:
         while self.pending and sim_time >= self.pending[0].at:
@@ -98,11 +116,36 @@ class _FaultInjector:
         for due, fault in list(self.restarts):
             if sim_time >= due:
                 self.restarts.remove((due, fault))
+                self._signal_simulator(signal.SIGUSR1)  # hold the world while the node starts (class doc)
                 old = self.processes.pop(fault.group)
                 old.stop()
-                self.processes[fault.group] = _Process(fault.group, self.commands[fault.group], self.log_dir,
-                                                       log_name=f"{fault.group}.restarted")
+                before = self._clock_subscriptions()
+                self.processes[fault.group] = restarted = _Process(
+                    fault.group, self.commands[fault.group], self.log_dir, log_name=f"{fault.group}.restarted")
+                self.starting.append([restarted, before, time.monotonic(), None])
                 self.events.append((f"restarted {fault.group}", sim_time, time.time()))
+        if self.starting:
+            now = time.monotonic()
+            for entry in self.starting:
+                process, before, spawned, up = entry
+                if up is None and (process.process.poll() is not None or now - spawned > RESTART_HOLD_LIMIT or (
+                        process.ready.is_set() and (self.graph_node is None or self._clock_subscriptions() - before))):
+                    entry[3] = now  # discovered; or dead at start-up, or never up (its log says why)
+            if all(up is not None and now - up >= RESTART_SETTLE for *_, up in self.starting):
+                self.starting.clear()
+                self._signal_simulator(signal.SIGUSR2)
+
+    def _clock_subscriptions(self) -> set[bytes]:
+        """The endpoint GIDs of every /clock subscription in the graph (a killed process's linger until its
+        participant's lease runs out, so counting them would not tell a new one)."""
+        if self.graph_node is None:
+            return set()
+        return {bytes(info.endpoint_gid) for info in self.graph_node.get_subscriptions_info_by_topic("/clock")}
+
+    def _signal_simulator(self, signum: int) -> None:
+        simulator = self.processes.get("simulator")
+        if simulator is not None and simulator.process.poll() is None:
+            simulator.process.send_signal(signum)
 
     @property
     def simulator_killed(self) -> bool:
@@ -149,7 +192,7 @@ def run_processes(specs: Sequence[NodeSpec], topics: Sequence[Topic], duration: 
     errors: list[str] = []
     commands = {group: ["ros2", "run", "fpr_experiments", "node_group", "--graph", graph_file, "--group", group,
                         "--lean"] for group in by_group if group != "simulator"}
-    injector = _FaultInjector(faults, processes, commands, log_dir) if faults else None
+    injector = _FaultInjector(faults, processes, commands, log_dir, graph_node=recorder) if faults else None
     try:
         for group, command in commands.items():
             processes[group] = _Process(group, command, log_dir)

@@ -176,6 +176,8 @@ class SimulatorNode(Node):
         self._wall_start: float | None = None
         self._sim_start = 0.0
         self.pacing_debt_dropped = 0.0  #: [s of wall time] pacing debt not caught up (PACING_MAX_DEBT_S)
+        #: set by SIGUSR1, cleared by SIGUSR2 (main()): run() holds the world between two steps (hold_paused)
+        self.pause_requested = False
         self.get_logger().info(
             f"scenario '{self.scenario.name}', n = {self.sim.n}, PX4 emulators bound to UDP ports {self.sim.ports}, "
             f"sending to {self.sim.remote_ports}, "
@@ -200,6 +202,8 @@ class SimulatorNode(Node):
                 steps += 1
                 if steps % steps_per_spin == 0:
                     executor.spin_once(timeout_sec=0.0)
+                if self.pause_requested:
+                    self.hold_paused(executor)
         finally:
             executor.remove_node(self)
             executor.shutdown(timeout_sec=0.0)
@@ -219,6 +223,19 @@ class SimulatorNode(Node):
                 return
             executor.spin_once(timeout_sec=0.05)
         self.get_logger().info(f"/clock has its {expected} subscriptions: starting the simulation")
+
+    def hold_paused(self, executor) -> None:
+        """Paused (SIGUSR1 until SIGUSR2; the fault injector's restart, fpr_experiments.processes): the world holds
+        between two steps — no physics, no new /clock time, no sensor data —, while every emulated PX4 keeps
+        sending HEARTBEATs and /clock is repeated (``_on_lockstep_wait``, as in a lockstep wait), so that nobody
+        takes the held simulator for a dead one. The pacing restarts at the resume (no catch-up burst)."""
+        t, start = self.sim.time, time.monotonic()
+        self.get_logger().info(f"paused at t = {t:.3f} s (SIGUSR1): the world holds until SIGUSR2")
+        while self.pause_requested and not self.sim.stop_requested and rclpy.ok(context=self.context):
+            self._on_lockstep_wait(time.monotonic() - start)
+            executor.spin_once(timeout_sec=0.05)
+        self._wall_start = None  # step() restarts the pacing from the resume
+        self.get_logger().info(f"resumed at t = {t:.3f} s after {time.monotonic() - start:.2f} s of wall time")
 
     def _on_lockstep_wait(self, waited: float) -> None:
         """While the lockstep waits at a boundary: /clock again (same time) every CLOCK_REPEAT_S of wall time. Every
@@ -449,7 +466,8 @@ class SimulatorNode(Node):
 def main(args=None) -> None:
     """``ros2 run fpr_sim simulator``. SIGINT / SIGTERM stop the loop between two steps (a flag), then the node is
     destroyed and the context shut down: rclpy's own handler would shut the context down asynchronously while the
-    loop publishes, which could crash the process (seen once as SIGSEGV in CI) or raise RCLError."""
+    loop publishes, which could crash the process (seen once as SIGSEGV in CI) or raise RCLError. SIGUSR1 pauses
+    the simulation between two steps, SIGUSR2 resumes it (:meth:`SimulatorNode.hold_paused`)."""
     import signal
     import sys
 
@@ -466,7 +484,12 @@ def main(args=None) -> None:
             raise KeyboardInterrupt  # before the loop runs, or a second signal: stop at once
         node.sim.stop_requested = True  # nothing else here: the handler may interrupt any Python code
 
+    def request_pause(signum, _frame) -> None:
+        if node is not None:
+            node.pause_requested = signum == signal.SIGUSR1  # a flag only, as request_stop
+
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous.update({sig: signal.signal(sig, request_pause) for sig in (signal.SIGUSR1, signal.SIGUSR2)})
     try:
         try:
             node = SimulatorNode()

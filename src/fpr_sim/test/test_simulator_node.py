@@ -146,6 +146,62 @@ def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
     assert f"plant kernel: {expected} (" in output, output
 
 
+def test_sigusr1_holds_the_world_and_sigusr2_resumes_it():
+    """The fault injector's restart (fpr_experiments.processes): SIGUSR1 pauses the simulation between two steps
+    (/clock repeated at the same time, no new time), SIGUSR2 resumes it; both said in the log."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    rclpy.init()
+    process = None
+    try:
+        listener = rclpy.create_node("pause_listener")
+        clocks = []
+        listener.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec + 1e-9 * m.clock.nanosec),
+                                     500)
+        process = subprocess.Popen(
+            [sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", "real_time_factor:=1.0",
+             "-p", "local_base_port:=0", "-p", "remote_base_port:=0", "-p", "emulated_cameras:=true"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+
+        def spin_until(condition, what: str, timeout: float = 30.0) -> None:
+            deadline = time.monotonic() + timeout
+            while not condition():
+                rclpy.spin_once(listener, timeout_sec=0.05)
+                assert process.poll() is None, process.stdout.read()
+                assert time.monotonic() < deadline, what
+
+        spin_until(lambda: len(clocks) >= 20, "no /clock from the simulator process")
+        def spin_for(seconds: float) -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                rclpy.spin_once(listener, timeout_sec=0.05)
+
+        process.send_signal(signal.SIGUSR1)
+        spin_for(0.5)  # the step in progress ends, and its /clock arrives
+        held_from = len(clocks)
+        spin_for(1.5)
+        held = clocks[held_from - 1:]
+        assert len(held) >= 4  # repeated every 0.25 s of wall time (CLOCK_REPEAT_S)
+        assert max(held) == min(held), held  # one and the same time: the world holds
+        paused_at = held[-1]
+        process.send_signal(signal.SIGUSR2)
+        spin_until(lambda: clocks[-1] > paused_at + 0.2, "no /clock after SIGUSR2")
+        process.send_signal(signal.SIGTERM)
+        output, _ = process.communicate(timeout=20.0)
+        listener.destroy_node()
+    finally:
+        if process is not None and process.poll() is None:
+            process.kill()
+            process.communicate()
+        rclpy.shutdown()
+    assert process.returncode == 0, output
+    assert f"paused at t = {paused_at:.3f} s (SIGUSR1)" in output, output
+    assert f"resumed at t = {paused_at:.3f} s after" in output, output
+
+
 def test_simulator_process_with_an_unknown_scenario_says_so_in_one_line_and_exits_2():
     import subprocess
     import sys
