@@ -11,8 +11,9 @@ import time
 from types import SimpleNamespace
 
 import pytest
-from fpr_experiments import processes
 from fpr_experiments.processes import ProcessFault, _FaultInjector
+
+from fpr_experiments import processes
 
 
 class _FakePopen:
