@@ -45,8 +45,9 @@ def _run(plant: Plant, steps: int, thrust: float = 0.4) -> np.ndarray:
 @pytest.mark.parametrize("kernel", ["python", "compiled"])
 def test_ideal_profile_and_effects_off_leave_the_plant_as_before(kernel):
     """Ideal: no realism computed, Table B.1 parameters, the scenario's own fleet configs. The hardware profile
-    with the three physics sections off steps bit for bit like the ideal plant (its sensor/link sections do not
-    touch the plant; its wind.uav_drag 0 only matters in wind)."""
+    with the three physics sections off and PX4's default attitude gain (the profile's px4 section, calibration pass
+    10) steps bit for bit like the ideal plant (its sensor/link sections do not touch the plant; its wind.uav_drag 0
+    only matters in wind)."""
     if kernel == "compiled":
         _require_compiled()
     ideal = Plant(scenario_from_dict(_HOVER), kernel=kernel)
@@ -54,7 +55,8 @@ def test_ideal_profile_and_effects_off_leave_the_plant_as_before(kernel):
     assert ideal.params == default_parameters(3)
     assert ideal.fleet.motor_tau == 0.008 and ideal.fleet.battery.config.internal_resistance == 0.015
     assert [[c.a_f, c.b_f] for c in ideal.fleet.coefficients] == [[8.02, -61.66], [8.22, -64.01], [8.15, -62.28]]
-    switched_off = Plant(scenario_from_dict({**_HOVER, **_OFF}, realism="hardware"), kernel=kernel)
+    switched_off = Plant(scenario_from_dict({**_HOVER, **_OFF, "px4": {"attitude_p_gain": [6.5, 6.5, 2.8]}},
+                                            realism="hardware"), kernel=kernel)
     assert not switched_off.realism.active
     assert np.array_equal(_run(ideal, 200), _run(switched_off, 200))
     assert np.array_equal(ideal.fleet.rotors, switched_off.fleet.rotors)
@@ -178,6 +180,44 @@ def test_hardware_actuation_sets_the_motor_lag_and_battery_resistance():
     # hover start: the rotors are set so that the produced thrusts are the hover thrusts (zero moment)
     produced = np.array(plant.fleet.rotors) * gains
     assert np.allclose(produced, produced[:, :1], rtol=1e-12)
+
+
+def _roll_step_response(scenario, step_deg: float = 10.0, duration: float = 1.0) -> tuple[float, float, float]:
+    """One vehicle of ``scenario``'s fleet (PX4 attitude + rate loop at its controller rate, its motor lag), no
+    structure: a roll step of ``step_deg`` from hover. Returns (t to 63 % [s], t to 90 % [s], overshoot [-])."""
+    fleet = QuadrotorFleet(1, scenario.quadrotor, scenario.px4, scenario.battery, kernel="python")
+    fleet.hover_rotor_state(np.array([10.0]))
+    half = math.radians(step_deg) / 2.0
+    command = AttitudeCommand(np.array([[math.cos(half), math.sin(half), 0.0, 0.0]]),
+                              np.array([10.0 / float(fleet.f_max[0])]), np.array([True]))
+    dt, per_control = 1e-3, max(1, round(1.0 / (scenario.px4.controller_rate * 1e-3)))
+    roll = []
+    for k in range(int(duration / dt)):
+        if k % per_control == 0:
+            fleet.control(command)
+        fleet.step(dt, np.zeros((1, 3)))
+        w, x = fleet.quat_list()[0][:2]
+        roll.append(math.degrees(2.0 * math.atan2(x, w)))
+    roll = np.array(roll)
+    t = (np.arange(len(roll)) + 1) * dt
+    return float(t[np.argmax(roll >= 0.632 * step_deg)]), float(t[np.argmax(roll >= 0.9 * step_deg)]), \
+        float(roll.max() / step_deg - 1.0)
+
+
+def test_hardware_px4_attitude_gain_is_aggressive_and_damped():
+    """The profile's PX4 attitude gain (calibration pass 10: MC_ROLL_P 9, the thesis's "aggressive" gains) makes the
+    emulated attitude loop faster than PX4's default 6.5 with the profile's own motor lag, still without ringing
+    (fpr_sim README, "PX4 attitude loop"); the ideal profile keeps PX4's defaults."""
+    from dataclasses import replace
+
+    hardware, ideal = scenario_from_dict(_HOVER, realism="hardware"), scenario_from_dict(_HOVER)
+    assert list(ideal.px4.attitude_p_gain) == [6.5, 6.5, 2.8]
+    assert hardware.px4.attitude_p_gain[:2] == [9.0, 9.0] and hardware.px4.attitude_p_gain[2] == 2.8
+    default_gain = replace(hardware, px4=replace(hardware.px4, attitude_p_gain=[6.5, 6.5, 2.8]))
+    t63, t90, overshoot = _roll_step_response(hardware)
+    t63_default, t90_default, _ = _roll_step_response(default_gain)
+    assert t63 < 0.9 * t63_default and t90 < 0.9 * t90_default  # measured 101 / 251 ms against 123 / 306 ms
+    assert overshoot < 0.02  # measured 0.8 %
 
 
 def test_thrust_noise_is_a_unit_gauss_markov_scaled_by_sigma():
