@@ -85,6 +85,16 @@ class ProcessFault:
     restart_after: float | None = None
 
 
+@dataclass
+class _Restarting:
+    """A restarted process the simulation is held for (_FaultInjector)."""
+
+    process: _Process
+    clock_subscriptions: set[bytes]  #: the /clock subscriptions' GIDs in the graph before it started
+    spawned: float  #: [s] monotonic wall time of the spawn
+    up: float | None = None  #: [s] monotonic wall time it was seen up (discovered, dead, or the hold's limit)
+
+
 class _FaultInjector:
     """Applies :class:`ProcessFault` s from the runner's polling loop; ``events`` lists (what, sim time, wall),
     wall as ``time.time()`` (the epoch seconds of the ROS log lines' stamps)."""
@@ -101,9 +111,8 @@ class _FaultInjector:
         self.restarts: list[tuple[float, ProcessFault]] = []
         self.processes, self.commands, self.log_dir = processes, commands, log_dir
         self.events: list[tuple[str, float, float]] = []
-        #: restarted processes the simulation is held for: [process, /clock subscriptions before it, wall time of
-        #: the spawn, wall time it was seen up or None]
-        self.starting: list[list] = []
+        #: restarted processes the simulation is held for (class doc)
+        self.starting: list[_Restarting] = []
         self.graph_node = graph_node  #: a node of the runner's, for the graph (the /clock subscriptions)
 
     def __call__(self, sim_time: float) -> None:
@@ -122,22 +131,27 @@ class _FaultInjector:
                 before = self._clock_subscriptions()
                 self.processes[fault.group] = restarted = _Process(
                     fault.group, self.commands[fault.group], self.log_dir, log_name=f"{fault.group}.restarted")
-                self.starting.append([restarted, before, time.monotonic(), None])
+                self.starting.append(_Restarting(restarted, before, time.monotonic()))
                 self.events.append((f"restarted {fault.group}", sim_time, time.time()))
         if self.starting:
             now = time.monotonic()
             for entry in self.starting:
-                process, before, spawned, up = entry
-                if up is None and (process.process.poll() is not None or now - spawned > RESTART_HOLD_LIMIT or (
-                        process.ready.is_set() and (self.graph_node is None or self._clock_subscriptions() - before))):
-                    entry[3] = now  # discovered; or dead at start-up, or never up (its log says why)
-            if all(up is not None and now - up >= RESTART_SETTLE for *_, up in self.starting):
+                if entry.up is not None:
+                    continue
+                if entry.process.process.poll() is not None or (entry.process.ready.is_set() and (
+                        self.graph_node is None or self._clock_subscriptions() - entry.clock_subscriptions)):
+                    entry.up = now  # discovered, or dead at start-up (its log says why)
+                elif now - entry.spawned > RESTART_HOLD_LIMIT:
+                    entry.up = now
+                    self.events.append((f"hold released: {entry.process.name} not up after {RESTART_HOLD_LIMIT:g} s "
+                                        "wall", sim_time, time.time()))
+            if all(e.up is not None and now - e.up >= RESTART_SETTLE for e in self.starting):
                 self.starting.clear()
                 self._signal_simulator(signal.SIGUSR2)
 
     def _clock_subscriptions(self) -> set[bytes]:
         """The endpoint GIDs of every /clock subscription in the graph (a killed process's linger until its
-        participant's lease runs out, so counting them would not tell a new one)."""
+        participant's lease runs out, so counting them would not tell a new one); empty without a graph node."""
         if self.graph_node is None:
             return set()
         return {bytes(info.endpoint_gid) for info in self.graph_node.get_subscriptions_info_by_topic("/clock")}

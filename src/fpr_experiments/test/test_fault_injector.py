@@ -103,3 +103,19 @@ def test_a_restarted_process_that_dies_at_start_up_does_not_hold_the_world(injec
     time.sleep(0.1)
     inj(10.0)
     assert simulator.signals == [signal.SIGUSR1, signal.SIGUSR2]
+
+
+def test_a_restarted_process_never_discovered_is_let_go_at_the_limit_and_said_so(injector, monkeypatch):
+    inj, procs, _graph = injector
+    monkeypatch.setattr(processes, "RESTART_HOLD_LIMIT", 0.05)
+    simulator = procs["simulator"].process
+    inj(8.0)
+    inj(10.0)
+    procs["uav2_controller"].ready.set()  # READY, but its /clock subscription never shows up
+    time.sleep(0.1)
+    inj(10.0)
+    assert simulator.signals == [signal.SIGUSR1]  # RESTART_SETTLE after the limit
+    time.sleep(0.1)
+    inj(10.0)
+    assert simulator.signals == [signal.SIGUSR1, signal.SIGUSR2]
+    assert inj.events[-1][0] == "hold released: uav2_controller not up after 0.05 s wall"

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from fpr_model.battery import TABLE_C1
 from fpr_model.parameters import default_parameters
+from fpr_model.rotations import quat_from_rotvec, quat_to_rotvec
 from fpr_model.selfcheck import _LIMITS, run_checks
 from fpr_sim._kernels import compiler_available, kernel_status
 from fpr_sim.plant import Plant, true_parameters
@@ -187,8 +188,7 @@ def _roll_step_response(scenario, step_deg: float = 10.0, duration: float = 1.0)
     structure: a roll step of ``step_deg`` from hover. Returns (t to 63 % [s], t to 90 % [s], overshoot [-])."""
     fleet = QuadrotorFleet(1, scenario.quadrotor, scenario.px4, scenario.battery, kernel="python")
     fleet.hover_rotor_state(np.array([10.0]))
-    half = math.radians(step_deg) / 2.0
-    command = AttitudeCommand(np.array([[math.cos(half), math.sin(half), 0.0, 0.0]]),
+    command = AttitudeCommand(quat_from_rotvec(np.array([math.radians(step_deg), 0.0, 0.0]))[None, :],
                               np.array([10.0 / float(fleet.f_max[0])]), np.array([True]))
     dt, per_control = 1e-3, max(1, round(1.0 / (scenario.px4.controller_rate * 1e-3)))
     roll = []
@@ -196,8 +196,7 @@ def _roll_step_response(scenario, step_deg: float = 10.0, duration: float = 1.0)
         if k % per_control == 0:
             fleet.control(command)
         fleet.step(dt, np.zeros((1, 3)))
-        w, x = fleet.quat_list()[0][:2]
-        roll.append(math.degrees(2.0 * math.atan2(x, w)))
+        roll.append(math.degrees(quat_to_rotvec(np.array(fleet.quat_list()[0]))[0]))
     roll = np.array(roll)
     t = (np.arange(len(roll)) + 1) * dt
     return float(t[np.argmax(roll >= 0.632 * step_deg)]), float(t[np.argmax(roll >= 0.9 * step_deg)]), \

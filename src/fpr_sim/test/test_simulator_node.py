@@ -105,6 +105,48 @@ def test_simulator_node_publishes_the_emulated_target(tmp_path):
     assert last.pose.orientation.z == pytest.approx(np.sin(0.2), abs=1e-3)
 
 
+class _SimulatorProcess:
+    """``python -m fpr_sim.simulator`` (emulated cameras, no MAVLink peers) with a listener of its /clock times."""
+
+    def __init__(self, real_time_factor: float) -> None:
+        import os
+        import subprocess
+        import sys
+
+        self.listener = rclpy.create_node("simulator_process_listener")
+        self.clocks: list[float] = []
+        self.listener.create_subscription(
+            Clock, "/clock", lambda m: self.clocks.append(m.clock.sec + 1e-9 * m.clock.nanosec), 500)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", f"real_time_factor:={real_time_factor}",
+             "-p", "local_base_port:=0", "-p", "remote_base_port:=0", "-p", "emulated_cameras:=true"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+
+    def spin_until(self, condition, what: str, timeout: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            rclpy.spin_once(self.listener, timeout_sec=0.05)
+            assert self.process.poll() is None, self.process.stdout.read()
+            assert time.monotonic() < deadline, what
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            rclpy.spin_once(self.listener, timeout_sec=0.05)
+
+    def stop(self, signum) -> tuple[int, str]:
+        """Send ``signum``; the exit status and the whole output."""
+        self.process.send_signal(signum)
+        output, _ = self.process.communicate(timeout=20.0)
+        return self.process.returncode, output
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.communicate()
+        self.listener.destroy_node()
+
+
 @pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])
 def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
     """Integration defect: SIGTERM/SIGINT during run() shut the context down while step() published ->
@@ -112,35 +154,20 @@ def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
     say at start which plant kernel runs."""
     import os
     import signal
-    import subprocess
-    import sys
 
     from fpr_sim._kernels import KERNEL_ENV, resolve_kernel
 
     rclpy.init()
-    process = None
     try:
-        listener = rclpy.create_node("signal_listener")
-        clocks = []
-        listener.create_subscription(Clock, "/clock", clocks.append, 50)
-        process = subprocess.Popen(
-            [sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", "real_time_factor:=0.0",
-             "-p", "local_base_port:=0", "-p", "remote_base_port:=0", "-p", "emulated_cameras:=true"],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
-        deadline = time.monotonic() + 30.0
-        while len(clocks) < 20:  # running (stepping and publishing as fast as it can)
-            rclpy.spin_once(listener, timeout_sec=0.05)
-            assert process.poll() is None, process.stdout.read()
-            assert time.monotonic() < deadline, "no /clock from the simulator process"
-        process.send_signal(getattr(signal, signal_name))
-        output, _ = process.communicate(timeout=20.0)
-        listener.destroy_node()
+        simulator = _SimulatorProcess(real_time_factor=0.0)  # stepping and publishing as fast as it can
+        try:
+            simulator.spin_until(lambda: len(simulator.clocks) >= 20, "no /clock from the simulator process")
+            status, output = simulator.stop(getattr(signal, signal_name))
+        finally:
+            simulator.close()
     finally:
-        if process is not None and process.poll() is None:
-            process.kill()
-            process.communicate()
         rclpy.shutdown()
-    assert process.returncode == 0, output
+    assert status == 0, output
     assert "Traceback" not in output and "RCLError" not in output, output
     expected = resolve_kernel(os.environ.get(KERNEL_ENV), 3)
     assert f"plant kernel: {expected} (" in output, output
@@ -149,55 +176,30 @@ def test_simulator_process_exits_quietly_on_a_signal_while_running(signal_name):
 def test_sigusr1_holds_the_world_and_sigusr2_resumes_it():
     """The fault injector's restart (fpr_experiments.processes): SIGUSR1 pauses the simulation between two steps
     (/clock repeated at the same time, no new time), SIGUSR2 resumes it; both said in the log."""
-    import os
     import signal
-    import subprocess
-    import sys
 
     rclpy.init()
-    process = None
     try:
-        listener = rclpy.create_node("pause_listener")
-        clocks = []
-        listener.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec + 1e-9 * m.clock.nanosec),
-                                     500)
-        process = subprocess.Popen(
-            [sys.executable, "-m", "fpr_sim.simulator", "--ros-args", "-p", "real_time_factor:=1.0",
-             "-p", "local_base_port:=0", "-p", "remote_base_port:=0", "-p", "emulated_cameras:=true"],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
-
-        def spin_until(condition, what: str, timeout: float = 30.0) -> None:
-            deadline = time.monotonic() + timeout
-            while not condition():
-                rclpy.spin_once(listener, timeout_sec=0.05)
-                assert process.poll() is None, process.stdout.read()
-                assert time.monotonic() < deadline, what
-
-        spin_until(lambda: len(clocks) >= 20, "no /clock from the simulator process")
-        def spin_for(seconds: float) -> None:
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                rclpy.spin_once(listener, timeout_sec=0.05)
-
-        process.send_signal(signal.SIGUSR1)
-        spin_for(0.5)  # the step in progress ends, and its /clock arrives
-        held_from = len(clocks)
-        spin_for(1.5)
-        held = clocks[held_from - 1:]
-        assert len(held) >= 4  # repeated every 0.25 s of wall time (CLOCK_REPEAT_S)
-        assert max(held) == min(held), held  # one and the same time: the world holds
-        paused_at = held[-1]
-        process.send_signal(signal.SIGUSR2)
-        spin_until(lambda: clocks[-1] > paused_at + 0.2, "no /clock after SIGUSR2")
-        process.send_signal(signal.SIGTERM)
-        output, _ = process.communicate(timeout=20.0)
-        listener.destroy_node()
+        simulator = _SimulatorProcess(real_time_factor=1.0)
+        clocks = simulator.clocks
+        try:
+            simulator.spin_until(lambda: len(clocks) >= 20, "no /clock from the simulator process")
+            simulator.process.send_signal(signal.SIGUSR1)
+            simulator.spin_for(0.5)  # the step in progress ends, and its /clock arrives
+            held_from = len(clocks)
+            simulator.spin_for(1.5)
+            held = clocks[held_from - 1:]
+            assert len(held) >= 4  # repeated every 0.25 s of wall time (CLOCK_REPEAT_S)
+            assert max(held) == min(held), held  # one and the same time: the world holds
+            paused_at = held[-1]
+            simulator.process.send_signal(signal.SIGUSR2)
+            simulator.spin_until(lambda: clocks[-1] > paused_at + 0.2, "no /clock after SIGUSR2")
+            status, output = simulator.stop(signal.SIGTERM)
+        finally:
+            simulator.close()
     finally:
-        if process is not None and process.poll() is None:
-            process.kill()
-            process.communicate()
         rclpy.shutdown()
-    assert process.returncode == 0, output
+    assert status == 0, output
     assert f"paused at t = {paused_at:.3f} s (SIGUSR1)" in output, output
     assert f"resumed at t = {paused_at:.3f} s after" in output, output
 
