@@ -120,14 +120,15 @@ def report_timing(frames: int = 100) -> None:
     for realism in ("ideal", "hardware"):
         scenario = load_scenario("hover", realism=realism)
         rig = CameraRig(scenario.cameras, scenario.n, scenario.seed)
-        detector = ArucoPoseDetector()
+        # one detector per camera, as on the robot (each keeps its own region of interest)
+        detectors = [ArucoPoseDetector() for _ in range(scenario.n)]
         rig.render(truths[0])
         start = time.perf_counter()
         images = [frame.image for truth in truths for frame in rig.render(truth)]
         render[realism] = (time.perf_counter() - start) / len(images)
         start = time.perf_counter()
-        for image in images:
-            detector.detect(image, rig.calibration.camera)
+        for k, image in enumerate(images):
+            detectors[k % scenario.n].detect(image, rig.calibration.camera)
         detect[realism] = (time.perf_counter() - start) / len(images)
     for name, times in (("render", render), ("detect", detect)):
         print(f"{name} per frame: ideal {1e3 * times['ideal']:.2f} ms, hardware {1e3 * times['hardware']:.2f} ms, "

@@ -33,7 +33,29 @@ _TIMEOUTS = re.compile(r"lockstep timeouts: (\d+)")
 _TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
 
 
+def node_pid(pid: int) -> int:
+    """The process that runs the node started as ``pid``: ``pid`` itself when the command exec'd the node (this
+    project's ``ros2`` stand-in), its child when ``ros2 run`` started the node as a child process and waits for it
+    (ros2cli's ``ros2 run``). Follows a chain of only children (Linux ``/proc/<pid>/task/<pid>/children``); a process
+    with no child or several, or no /proc, is the node."""
+    for _ in range(8):
+        try:
+            with open(f"/proc/{pid}/task/{pid}/children", encoding="ascii") as children_file:
+                children = children_file.read().split()
+        except OSError:
+            return pid
+        if len(children) != 1:
+            return pid
+        pid = int(children[0])
+    return pid
+
+
 class _Process:
+    """One process of the graph, its output drained into ``<log_dir>/<name>.log``. Signals meant for the node
+    (:meth:`crash`, :meth:`signal_node`, :meth:`stop`) reach the node's own process, also when ``ros2 run`` started
+    it as a child (:func:`node_pid`): a SIGUSR1 to ros2cli's waiting wrapper would end the wrapper (Python's
+    default action) and leave the node running, a SIGKILL would orphan the node."""
+
     def __init__(self, name: str, command: list[str], log_dir: str, log_name: str | None = None) -> None:
         self.name = name
         self.lines: list[str] = []
@@ -53,13 +75,36 @@ class _Process:
             if line.startswith("READY"):
                 self.ready.set()
 
-    def stop(self) -> None:
+    def _kill_node(self, signum: int) -> None:
+        """``signum`` to the node's process, then to the started process if that is another (a wrapper)."""
+        if self.process.poll() is not None:
+            return
+        node = node_pid(self.process.pid)
+        for pid in dict.fromkeys((node, self.process.pid)):
+            try:
+                os.kill(pid, signum)
+            except ProcessLookupError:
+                pass
+
+    def crash(self) -> None:
+        """SIGKILL the node (a crash: no clean shutdown), and its ``ros2 run`` wrapper if it has one."""
+        self._kill_node(signal.SIGKILL)
+
+    def signal_node(self, signum: int) -> None:
+        """``signum`` to the node's process only (the wrapper, if any, keeps waiting for it)."""
         if self.process.poll() is None:
-            self.process.terminate()
+            try:
+                os.kill(node_pid(self.process.pid), signum)
+            except ProcessLookupError:
+                pass  # it has just ended
+
+    def stop(self) -> None:
+        # rclpy shuts down on SIGTERM; a ros2 run wrapper would not pass it on, but ends when its node has ended
+        self.signal_node(signal.SIGTERM)
         try:
             self.process.wait(timeout=10.0)
         except subprocess.TimeoutExpired:
-            self.process.kill()
+            self._kill_node(signal.SIGKILL)
             self.process.wait()
         self._thread.join(timeout=5.0)
         self.log.close()
@@ -118,7 +163,7 @@ class _FaultInjector:
     def __call__(self, sim_time: float) -> None:
         while self.pending and sim_time >= self.pending[0].at:
             fault = self.pending.pop(0)
-            self.processes[fault.group].process.kill()
+            self.processes[fault.group].crash()
             self.events.append((f"killed {fault.group}", sim_time, time.time()))
             if fault.restart_after is not None:
                 self.restarts.append((sim_time + fault.restart_after, fault))
@@ -158,8 +203,8 @@ class _FaultInjector:
 
     def _signal_simulator(self, signum: int) -> None:
         simulator = self.processes.get("simulator")
-        if simulator is not None and simulator.process.poll() is None:
-            simulator.process.send_signal(signum)
+        if simulator is not None:
+            simulator.signal_node(signum)
 
     @property
     def simulator_killed(self) -> bool:

@@ -41,6 +41,13 @@ class _FakeProcess:
     def stop(self) -> None:
         self.stopped = True
 
+    def crash(self) -> None:
+        self.process.kill()
+
+    def signal_node(self, signum: int) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signum)
+
 
 class _FakeGraph:
     def __init__(self) -> None:
@@ -119,3 +126,69 @@ def test_a_restarted_process_never_discovered_is_let_go_at_the_limit_and_said_so
     inj(10.0)
     assert simulator.signals == [signal.SIGUSR1, signal.SIGUSR2]
     assert inj.events[-1][0] == "hold released: uav2_controller not up after 0.05 s wall"
+
+
+#: a node that reports the signals it gets (as the simulator does SIGUSR1 / SIGUSR2) and ends on SIGTERM
+_NODE = """
+import signal, sys, time
+def on_signal(signum, frame):
+    print(signal.Signals(signum).name, flush=True)
+    if signum == signal.SIGTERM:
+        sys.exit(0)
+for s in (signal.SIGUSR1, signal.SIGUSR2, signal.SIGTERM):
+    signal.signal(s, on_signal)
+print("READY", flush=True)
+while True:
+    time.sleep(0.01)
+"""
+#: what ros2cli's ``ros2 run`` does: start the node as a child process and wait for it (Python's default actions
+#: for SIGUSR1 / SIGTERM: the wrapper would end and leave the node running)
+_WRAPPER = "import subprocess, sys; sys.exit(subprocess.call([sys.executable, '-c', sys.argv[1]]))"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
+    except OSError:
+        return False
+
+
+def _wait_for(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+@pytest.mark.parametrize("wrapped", [False, True], ids=["exec", "ros2cli-wrapper"])
+def test_signals_reach_the_node_also_behind_a_ros2_run_wrapper(tmp_path, wrapped):
+    """The fault injector's SIGUSR1 / SIGUSR2 reach the node, not a wrapper that would die of them; its crash
+    kills the node and the wrapper (no orphan); a stop ends both through the node's SIGTERM."""
+    import sys
+
+    command = [sys.executable, "-c", _WRAPPER, _NODE] if wrapped else [sys.executable, "-c", _NODE]
+    for ending in ("crash", "stop"):
+        proc = processes._Process(f"node_{ending}", command, str(tmp_path))
+        try:
+            assert proc.ready.wait(20.0)
+            node = processes.node_pid(proc.process.pid)
+            assert (node != proc.process.pid) == wrapped
+            for signum in (signal.SIGUSR1, signal.SIGUSR2):  # one at a time: each handler prints a line
+                proc.signal_node(signum)
+                assert _wait_for(lambda p=proc, s=signum: p.lines[-1] == signal.Signals(s).name), proc.lines
+            assert proc.process.poll() is None and _alive(node)  # the wrapper still waits for its node
+            if ending == "crash":
+                proc.crash()
+                assert proc.process.wait(10.0) == -signal.SIGKILL
+            else:
+                proc.stop()
+                assert proc.process.returncode == 0 and proc.lines[-1] == "SIGTERM"
+            assert _wait_for(lambda n=node: not _alive(n)), "the node outlived its wrapper"
+        finally:
+            if proc.process.poll() is None:
+                proc.process.kill()
+            if not proc.log.closed:
+                proc.stop()

@@ -13,7 +13,8 @@ Options: Gaussian blur (σ in px) before Gaussian pixel noise (σ in grey levels
 Per-frame realism effects (:class:`FrameEffects`, drawn by :mod:`fpr_sim.cameras`), applied in the order light
 meets them: an occluding band over the marker (a leg or its shadow), motion blur along the image motion during
 the exposure (a line kernel on the marker's region only), the optical blur, then the photometric gain and offset
-(a 256-entry table), the lighting gradient and the sensor noise on float32 grey levels, rounded in place. Without
+(a 256-entry table), the lighting gradient and the sensor noise on float32 grey levels, rounded to uint8 in the
+noise's addition (OpenCV's saturating add: half to even, clipped). Without
 effects the image is bit-identical to the effect-free renderer. The band and the optical blur work on the region
 they can change (the rest of the frame is the uniform background, which a blur leaves as it is): the same pixels as
 whole-frame operations (``test_render_regions.py`` keeps the former code as its reference).
@@ -185,11 +186,14 @@ class MarkerRenderer:
             noisy = self._photometric(image, effects) if photometric else image.astype(np.float32)
             if noise_sigma > 0.0:
                 rng = rng if rng is not None else np.random.default_rng(0)
-                noisy += self._noise_patch(rng, noise_sigma)
-            # in place: a fresh 1.2 MB array per operation cost its page faults (issue 15)
-            np.rint(noisy, out=noisy)
-            np.clip(noisy, 0, 255, out=noisy)
-            image = noisy.astype(np.uint8)
+                # one pass: the float32 sum, then OpenCV's saturate_cast to uint8 (round half to even, clipped to
+                # 0-255): the bits of np.rint + np.clip + astype in a third of their time (test_render_regions)
+                image = cv2.add(noisy, self._noise_patch(rng, noise_sigma), dtype=cv2.CV_8U)
+            else:
+                # in place: a fresh 1.2 MB array per operation cost its page faults (issue 15)
+                np.rint(noisy, out=noisy)
+                np.clip(noisy, 0, 255, out=noisy)
+                image = noisy.astype(np.uint8)
         return RenderResult(image, drawn, in_view, corners)
 
     def _occlude_and_smear(self, image: np.ndarray, outer_px: np.ndarray,

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 from fpr_model.calibration import CameraModel
+from fpr_model.opencv_dispatch import opencv_dispatch
 from fpr_sim.camera_renderer import FrameEffects, MarkerRenderer
 
 
@@ -90,9 +91,31 @@ def _former_photometric_and_noise(image: np.ndarray, effects: FrameEffects, nois
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
-def test_the_grey_level_pass_gives_the_former_pixels():
-    """Gain and offset through a table, the gradient into a kept buffer, the noise bank scaled once, rint and clip
-    in place: the bytes of the former whole-frame operations, for frames of two sizes and a change of σ."""
+@pytest.mark.parametrize("dispatch", ["native", "baseline"])
+def test_the_grey_level_pass_gives_the_former_pixels(dispatch):
+    """Gain and offset through a table, the gradient into a kept buffer, the noise bank scaled once, the noise's
+    addition rounded and clipped by OpenCV's saturating add: the bytes of the former whole-frame operations, for
+    frames of two sizes and a change of σ, with OpenCV's SIMD code and with its baseline code (what the
+    experiments fly, fpr_model.opencv_dispatch)."""
+    with opencv_dispatch(dispatch):
+        _compare_grey_level_pass()
+
+
+def test_the_saturating_add_rounds_half_to_even_and_clips_like_numpy():
+    """The renderer's last step, cv2.add(float32, float32, dtype=CV_8U), against np.rint + np.clip + astype on
+    exact halves (…, -0.5, 0.5, 1.5, 2.5, …, 254.5, 255.5, …), values far outside 0-255 and a strided window."""
+    grey = np.arange(-4.0, 260.0, 0.5, dtype=np.float32)
+    grey = np.concatenate([grey, np.float32([-1e6, 1e6, 127.49999, 127.50001])])
+    bank = np.tile(np.float32([0.0, 0.25, -0.25, 1.0]), (grey.size, 2))
+    window = bank[:, 1:5]  # a view with a row stride, as the noise window is
+    for dispatch in ("native", "baseline"):
+        with opencv_dispatch(dispatch):
+            pixels = np.repeat(grey[:, None], 4, axis=1)
+            expected = np.clip(np.rint(pixels + window), 0, 255).astype(np.uint8)
+            assert cv2.add(pixels, window, dtype=cv2.CV_8U).tobytes() == expected.tobytes()
+
+
+def _compare_grey_level_pass() -> None:
     rng = np.random.default_rng(2)
     for width, height in ((640, 480), (320, 240)):
         renderer = MarkerRenderer(camera=CameraModel(fx=300.0, fy=300.0, cx=width / 2, cy=height / 2, width=width,
