@@ -5,6 +5,7 @@ passed."""
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
@@ -172,6 +173,7 @@ def test_signals_reach_the_node_also_behind_a_ros2_run_wrapper(tmp_path, wrapped
     command = [sys.executable, "-c", _WRAPPER, _NODE] if wrapped else [sys.executable, "-c", _NODE]
     for ending in ("crash", "stop"):
         proc = processes._Process(f"node_{ending}", command, str(tmp_path))
+        node = None
         try:
             assert proc.ready.wait(20.0)
             node = processes.node_pid(proc.process.pid)
@@ -187,8 +189,10 @@ def test_signals_reach_the_node_also_behind_a_ros2_run_wrapper(tmp_path, wrapped
                 proc.stop()
                 assert proc.process.returncode == 0 and proc.lines[-1] == "SIGTERM"
             assert _wait_for(lambda n=node: not _alive(n)), "the node outlived its wrapper"
-        finally:
-            if proc.process.poll() is None:
-                proc.process.kill()
+        finally:  # no process left behind, also when an assertion failed
+            proc.crash()
+            proc.process.wait(10.0)
+            if node is not None and _alive(node):
+                os.kill(node, signal.SIGKILL)
             if not proc.log.closed:
                 proc.stop()
