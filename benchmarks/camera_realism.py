@@ -1,7 +1,7 @@
 """Camera realism (issue 11, sensors): detection rate and raw ArUco accuracy over a rendered hover, ideal vs
 hardware, beside the thesis's Tables 4.6 / 4.8; and the render + detect time per frame, ideal vs hardware.
 
-    bash scripts/isolated.sh python benchmarks/camera_realism.py [accuracy|timing|all] [--seconds 10]
+    bash scripts/isolated.sh python benchmarks/camera_realism.py [accuracy|timing|regions|all] [--seconds 10]
 
 Accuracy: a synthetic hover of the bundled ``hover`` scenario's robot (:func:`hover_truths`: leg angles 45° ± 3°,
 platform roll / pitch ± 2°, ± 2 cm, each UAV's attitude ± 2° about its hover attitude, sinusoids of 0.4-1.7 Hz with
@@ -135,15 +135,48 @@ def report_timing(frames: int = 100) -> None:
               f"ratio hardware/ideal {times['hardware'] / times['ideal']:.2f}")
 
 
+def report_region_misses(seconds: float) -> None:
+    """Per profile: what the whole-frame search after a region-of-interest miss finds (fpr_estimation.aruco's
+    fallback), over the rendered hover, one detector per camera."""
+    for realism in ("ideal", "hardware"):
+        scenario = load_scenario("hover", realism=realism)
+        rig = CameraRig(scenario.cameras, scenario.n, scenario.seed)
+        detectors = [ArucoPoseDetector() for _ in range(scenario.n)]
+        hits = rescued = lost = whole = 0
+        whole_time = 0.0
+        for truth in hover_truths(seconds, scenario.cameras.rate):
+            for i, frame in enumerate(rig.render(truth)):
+                detector, image = detectors[i], frame.image
+                region = detector.roi
+                found_in_region = False
+                if region is not None:
+                    x0, y0, x1, y1 = region
+                    found_in_region = detector._find(image[y0:y1, x0:x1]) is not None
+                    hits += found_in_region
+                if not found_in_region:  # what detect() does next: the whole frame
+                    start = time.perf_counter()
+                    found = detector._find(image) is not None
+                    whole_time += time.perf_counter() - start
+                    whole += 1
+                    if region is not None:
+                        rescued += found
+                        lost += not found
+                detector.detect(image, rig.calibration.camera)  # the detector's own state (region, hold)
+        print(f"{realism}: region hits {hits}; after a region miss the whole frame found the marker {rescued} times, "
+              f"nothing {lost} times; whole-frame searches {whole} at {1e3 * whole_time / max(whole, 1):.2f} ms mean")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("what", nargs="?", default="all", choices=("accuracy", "timing", "all"))
+    parser.add_argument("what", nargs="?", default="all", choices=("accuracy", "timing", "regions", "all"))
     parser.add_argument("--seconds", type=float, default=10.0)
     args = parser.parse_args()
     if args.what in ("accuracy", "all"):
         report_accuracy(args.seconds)
     if args.what in ("timing", "all"):
         report_timing()
+    if args.what in ("regions", "all"):
+        report_region_misses(args.seconds)
 
 
 if __name__ == "__main__":
