@@ -8,7 +8,11 @@ process is SIGKILLed (``kill``) or SIGSTOPped (``hang``, a frozen process: its D
     bash scripts/isolated.sh python benchmarks/dds_hung_subscriber.py --mode hang --type bounded --trials 8
 
 ``--type bounded`` publishes std_msgs/Float64 (a fixed-size type), ``unbounded`` std_msgs/Float64MultiArray.
-Run it alone (it measures wall time), under scripts/isolated.sh like every ROS run.
+Run it alone (it measures wall time), under scripts/isolated.sh like every ROS run. UDP only, no shared memory
+(inside the isolated namespace, where SUBNET is this machine's loopback):
+
+    bash scripts/isolated.sh env ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET FASTDDS_BUILTIN_TRANSPORTS=UDPv4 \
+        python benchmarks/dds_hung_subscriber.py --trials 10
 """
 
 from __future__ import annotations
