@@ -63,7 +63,11 @@ def trial(mode: str, kind: str, reliability: str) -> list[tuple[float, float]]:
     node = Node("dds_hung_subscriber_publisher", context=context)
     try:
         publisher = node.create_publisher(_message_type(kind), "/dds_hung_subscriber", _qos(reliability))
+        deadline = time.monotonic() + 30.0
         while publisher.get_subscription_count() == 0:
+            if victim.poll() is not None or time.monotonic() > deadline:
+                raise SystemExit("dds_hung_subscriber: the subscriber process did not come up or was not discovered "
+                                 "within 30 s (run it under scripts/isolated.sh)")
             time.sleep(0.05)
         message = _message_type(kind)()
         if kind != "bounded":
