@@ -10,6 +10,11 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 100 + 1))}"
 export FPR_ROOT="$ROOT"
+# the interfaces of this process's network namespace (/proc/self/net/dev is per namespace; /sys/class/net is not)
+interfaces() { awk -F: 'NR > 2 { gsub(/ /, "", $1); print $1 }' /proc/self/net/dev 2>/dev/null || true; }
+if [[ "${FPR_IN_NETNS:-0}" == 1 && "$(interfaces)" != lo ]]; then
+  FPR_IN_NETNS=0  # inherited or set by hand, but this namespace has more than loopback: not isolated yet
+fi
 if [[ "${FPR_IN_NETNS:-0}" != 1 ]] && unshare -n true 2>/dev/null; then
   export FPR_IN_NETNS=1
   exec unshare -n -- "$0" "$@"
