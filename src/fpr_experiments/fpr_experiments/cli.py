@@ -245,6 +245,9 @@ def run_main(argv: list[str] | None = None) -> int:
             print(f"wrote {_write_results(names, output_root, _results_path(args), _command_line(args))}")
             return 0
         from fpr_experiments.catalog import check_realism, load_experiment
+        from fpr_experiments.network import say_isolation
+
+        say_isolation()  # where the flights' DDS traffic can go (a warning outside scripts/isolated.sh's namespace)
 
         if args.realism is not None:
             check_realism(args.realism, "--realism")

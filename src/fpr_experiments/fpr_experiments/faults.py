@@ -418,6 +418,9 @@ def main(argv: list[str] | None = None) -> int:
             sections.append((alternative, ALTERNATIVES[alternative]["description"], results))
         alternatives = []
     else:
+        from fpr_experiments.network import say_isolation
+
+        say_isolation()  # where the flights' DDS traffic can go (a warning outside scripts/isolated.sh's namespace)
         alternatives = args.alternatives
     for alternative in alternatives:
         spec = ALTERNATIVES[alternative]

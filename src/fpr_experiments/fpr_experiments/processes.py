@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from fpr_experiments.graph import NodeSpec, groups, write_graph_file
+from fpr_experiments.network import separate_hosts_environment
 from fpr_experiments.recording import Topic
 
 #: [s] wall: every group process must print READY within this
@@ -29,9 +30,6 @@ SIMULATOR_LINGER = 3.0
 RESTART_SETTLE = 0.5
 #: [s] wall: the simulation resumes anyway this long after a restart (a process that never comes up)
 RESTART_HOLD_LIMIT = 60.0
-#: Fast DDS for the processes when they run where nothing but loopback exists (scripts/isolated.sh's network
-#: namespace): UDP only, no shared memory, as between the robot's computers (:func:`separate_hosts_environment`)
-SEPARATE_HOSTS_ENVIRONMENT = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 _TIMEOUTS = re.compile(r"lockstep timeouts: (\d+)")
 _TIMEOUT_WARNING = re.compile(r"lockstep: (\d+) control periods timed out")
 
@@ -51,31 +49,6 @@ def node_pid(pid: int) -> int:
             return pid
         pid = int(children[0])
     return pid
-
-
-def network_interfaces(net_dev: str = "/proc/self/net/dev") -> set[str]:
-    """The network interfaces of this process's network namespace (``/proc/self/net/dev`` is per namespace;
-    ``/sys/class/net`` shows the namespace that mounted sysfs); empty when unreadable."""
-    try:
-        with open(net_dev, encoding="ascii") as dev:
-            return {line.split(":", 1)[0].strip() for line in dev.read().splitlines()[2:] if ":" in line}
-    except OSError:
-        return set()
-
-
-def separate_hosts_environment(net_dev: str = "/proc/self/net/dev") -> dict[str, str]:
-    """The middleware settings of the processes (:func:`run_processes`): :data:`SEPARATE_HOSTS_ENVIRONMENT` when
-    this runs in scripts/isolated.sh's network namespace (``FPR_IN_NETNS=1``) AND the namespace has no interface
-    but loopback (so a subnet-wide discovery cannot leave the machine), else nothing (LOCALHOST stays).
-
-    Why: the processes stand for separate computers, which talk UDP over Wi-Fi. Between processes of one host
-    Fast DDS uses shared memory, and there a SIGSTOPped (frozen) subscriber process blocked a best-effort
-    publish() for 1.0 s, once a second, in 1-2 of 8 trials (benchmarks/dds_hung_subscriber.py, fpr_px4_bridge
-    README); on UDP only, 0 of 10. Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, rmw_fastrtps sets the transports
-    itself (FASTDDS_BUILTIN_TRANSPORTS has no effect), hence SUBNET, which loopback alone confines."""
-    if os.environ.get("FPR_IN_NETNS") != "1" or network_interfaces(net_dev) != {"lo"}:
-        return {}
-    return dict(SEPARATE_HOSTS_ENVIRONMENT)
 
 
 class _Process:

@@ -1,4 +1,4 @@
-"""The multi-process runner's middleware choice (fpr_experiments.processes.separate_hosts_environment): UDP only
+"""The multi-process runner's middleware choice (fpr_experiments.network.separate_hosts_environment): UDP only
 when it runs in scripts/isolated.sh's network namespace with nothing but loopback, Fast DDS's defaults (LOCALHOST
 discovery) anywhere else; and scripts/isolated.sh's own check that an inherited FPR_IN_NETNS=1 really is such a
 namespace."""
@@ -10,7 +10,12 @@ import shutil
 import subprocess
 
 import pytest
-from fpr_experiments.processes import SEPARATE_HOSTS_ENVIRONMENT, network_interfaces, separate_hosts_environment
+from fpr_experiments.network import (
+    SEPARATE_HOSTS_ENVIRONMENT,
+    isolation_line,
+    network_interfaces,
+    separate_hosts_environment,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 HEADER = ("Inter-|   Receive                                                |  Transmit\n"
@@ -68,3 +73,19 @@ def test_isolated_sh_does_not_trust_an_inherited_flag_where_a_link_exists():
     interfaces = {line.split(":", 1)[0].strip() for line in result.stdout.splitlines()[2:] if ":" in line}
     assert interfaces == {"lo"}, result.stdout
     assert "FLAG=1" in result.stdout
+
+
+def test_isolation_line_says_where_the_traffic_can_go(tmp_path, monkeypatch):
+    line, warning = isolation_line(_net_dev(tmp_path, "lo"))
+    assert not warning and "nothing leaves this machine" in line
+    outside = _net_dev(tmp_path, "lo", "eth0")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "17")
+    line, warning = isolation_line(outside)
+    assert not warning and "LOCALHOST, domain 17" in line and "scripts/isolated.sh" in line
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    monkeypatch.delenv("ROS_DOMAIN_ID")
+    line, warning = isolation_line(outside)  # Jazzy's default: the LAN sees the simulated swarm
+    assert warning and line.startswith("WARNING") and "SUBNET" in line and "domain 0" in line
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    assert isolation_line(outside)[1]
