@@ -163,3 +163,27 @@ def test_out_of_range_start_up_override_is_refused_with_the_reason(name, value):
         error = None
         gc.collect()
         rclpy.shutdown(context=context)
+
+
+def test_node_seconds_reads_the_clock_now_reads():
+    """fpr_model.node_parameters.node_seconds (every node's ``_now``) gives exactly ``now().nanoseconds * 1e-9``
+    on simulated time, also without the handle it reads through."""
+    from types import SimpleNamespace
+
+    from fpr_model.node_parameters import node_seconds
+    from rclpy.time import Time
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("clock_probe", context=context,
+                                 parameter_overrides=[Parameter("use_sim_time", value=True)])
+        clock = node.get_clock()
+        for nanoseconds in (0, 1, 123_456_789, 86_400 * 10**9 + 7):
+            clock.set_ros_time_override(Time(nanoseconds=nanoseconds, clock_type=clock.clock_type))
+            assert node_seconds(node) == clock.now().nanoseconds * 1e-9 == nanoseconds * 1e-9
+        stand_in = SimpleNamespace(get_clock=lambda: SimpleNamespace(now=clock.now))  # a clock without .handle
+        assert node_seconds(stand_in) == clock.now().nanoseconds * 1e-9
+        node.destroy_node()
+    finally:
+        context.try_shutdown()

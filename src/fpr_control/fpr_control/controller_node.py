@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.diagnostics import OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param, throttle
+from fpr_model.node_parameters import NodeParameters, Param, node_seconds, throttle
 from fpr_model.parameters import default_parameters, load_parameters
 from fpr_model.rotations import quat_to_euler_zyx
 from rclpy.node import Node
@@ -309,7 +309,7 @@ class ControllerNode(Node):
             + (f", impedance force input {force_input}" if mode == "impedance" else ""))
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     # ---- callbacks: message -> core dataclasses -----------------------------------------------------
     def _on_local(self, msg: LocalState) -> None:
@@ -554,7 +554,7 @@ class ControllerNode(Node):
     def _publish_diagnostics(self, out, stamp) -> None:
         """Once a second (node clock): OK while the configured law runs on fresh inputs; WARN in the NC fallback,
         while holding without a valid local state, or with a saturated command."""
-        now = self.get_clock().now().nanoseconds * 1e-9
+        now = self._now()
         if now < self._next_diagnostics:
             return
         self._next_diagnostics = now + 1.0

@@ -10,7 +10,7 @@ import os
 
 import rclpy
 import yaml
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, node_seconds
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
@@ -60,7 +60,7 @@ class JoyScriptNode(Node):
                                f"{self.timeline.duration:.1f} s, {ending}")
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _on_tick(self) -> None:
         now = self._now()

@@ -6,7 +6,7 @@ on ``joy`` — for machines without the ROS ``joy`` package. Core: :mod:`fpr_con
 
 from __future__ import annotations
 
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, node_seconds
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
@@ -37,7 +37,7 @@ class JoystickNode(Node):
         self.create_timer(1.0 / self.poll_rate, self._on_poll)
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _on_poll(self) -> None:
         now = self._now()

@@ -22,7 +22,7 @@ import math
 import os
 
 import yaml
-from fpr_model.node_parameters import NodeParameters, throttle
+from fpr_model.node_parameters import NodeParameters, node_seconds, throttle
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -117,7 +117,7 @@ class TeleopNode(Node):
                                   f"timeout {target_timeout:g} s)" if target_approach else "off"))
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _on_joy(self, msg: Joy) -> None:
         reason = self.filter.joy(self._now(), list(msg.axes), list(msg.buttons))

@@ -21,7 +21,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.calibration import EULER_ORDERS, CameraModel, EulerZxzPose, VisionCalibration
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param, throttle
+from fpr_model.node_parameters import NodeParameters, Param, node_seconds, throttle
 from fpr_model.rotations import inverse_pose
 from geometry_msgs.msg import TransformStamped, TwistStamped
 from rclpy.node import Node
@@ -167,7 +167,7 @@ class PoseEstimatorNode(Node):
         self.create_timer(1.0 / rate, self._on_timer)
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _log_events(self) -> None:
         """One line per core event (refusal, fallback, return), at most one per kind per log_interval."""

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 from fpr_control.node_utils import LOG_THROTTLE_S
-from fpr_model.node_parameters import NodeParameters, throttle
+from fpr_model.node_parameters import NodeParameters, node_seconds, throttle
 from fpr_model.rotations import quat_to_rotmat, rotmat_to_quat
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -84,7 +84,7 @@ class DetectionFallbackNode(Node):
             f"(noise {100 * config.position_noise:g} cm / {math.degrees(config.angle_noise):g} deg; thesis §4.4.2)")
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _on_mocap(self, msg: FprState) -> None:
         def position(p):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, node_seconds
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -71,7 +71,7 @@ class InfoLinkNode(Node):
         self.get_logger().info(f"info_link: /fpr/info -> {pattern}, outage [{start}, {end}) s, channel {channel}")
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _deliver(self, deliveries) -> None:
         for receiver, msg in deliveries:

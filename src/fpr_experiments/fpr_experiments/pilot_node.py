@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import yaml
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, node_seconds
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy
@@ -62,7 +62,7 @@ class PilotNode(Node):
                                f"reaction {config.reaction_delay} s, seed {config.seed}")
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     def _on_truth(self, msg: FprState) -> None:
         if self._start is None:

@@ -21,7 +21,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.battery import thrust_coefficients
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param
+from fpr_model.node_parameters import NodeParameters, Param, node_seconds
 from geometry_msgs.msg import TwistStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
@@ -265,7 +265,7 @@ class Px4BridgeNode(Node):
         return "ros_time" if bool(self.get_parameter("use_sim_time").value) else "estimate"
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return node_seconds(self)
 
     # ---- callbacks -----------------------------------------------------------------------------------------
     def _on_setpoint(self, msg: AttitudeThrustSetpoint) -> None:
