@@ -95,10 +95,7 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # the hardware profile with the ArUco detectors forgetting their region of interest at the first frame
           # without the marker (before roi_hold; compare with lever 7)
           "hardware realism, ArUco roi_hold 0": (True, True, 100.0, "hardware", "sweep",
-                                                 {"aruco_detector": {"roi_hold": 0}}),
-          # the default with the sweep looking at every subscription of every node (before the SweepExecutor passed
-          # over the nodes with nothing queued: skip_idle_nodes)
-          "sweep looking at every subscription": (True, True, 100.0, "ideal", "sweep-full")}
+                                                 {"aruco_detector": {"roi_hold": 0}})}
 
 
 #: [µs] bench_control's n = 3 communicating step, median, on the VM of docs/benchmarks.md's 2026-12-01 figures

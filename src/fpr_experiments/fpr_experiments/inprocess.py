@@ -53,8 +53,6 @@ from fpr_experiments.sweep_executor import SweepExecutor, drain_rclpy_executor
 
 #: topics every node has and nobody waits for
 _IGNORED_TOPICS = ("/rosout", "/parameter_events")
-#: the executor kinds that are the SweepExecutor (InProcessGraph's ``executor``)
-_SWEEPS = ("sweep", "sweep-info-dds", "sweep-dds", "sweep-copy", "sweep-full")
 
 
 class InProcessGraph:
@@ -68,8 +66,7 @@ class InProcessGraph:
         that take MessageInfo, through DDS: before fpr_experiments.intra_process numbered them itself), "sweep-dds"
         (the sweep with every message through DDS),
         "sweep-copy" (through DDS, and converting each message once per subscription, as rclpy does, instead of once
-        per message: fpr_experiments.sweep_executor), "sweep-full" (the sweep looking at every subscription of
-        every node, as before SweepExecutor's ``skip_idle_nodes``; same results) or "rclpy" (deterministic mode; None:
+        per message: fpr_experiments.sweep_executor) or "rclpy" (deterministic mode; None:
         sweep for lean nodes, else rclpy); the
         threaded mode always spins rclpy's executor. ``real_time_factor``: the simulator's pacing (0: as fast as
         the graph runs); None: deterministic runs are not paced (their results do not depend on it) unless a live
@@ -81,8 +78,9 @@ class InProcessGraph:
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
-        if executor not in _SWEEPS + ("rclpy",):
-            raise ValueError(f"executor must be one of {', '.join(map(repr, _SWEEPS + ('rclpy',)))}, got {executor!r}")
+        if executor not in ("sweep", "sweep-info-dds", "sweep-dds", "sweep-copy", "rclpy"):
+            raise ValueError("executor must be 'sweep', 'sweep-info-dds', 'sweep-dds', 'sweep-copy' or 'rclpy', got "
+                             f"{executor!r}")
         if executor != "rclpy" and not deterministic:
             raise ValueError(f"executor {executor!r} needs deterministic=True (the threaded runner waits in rclpy)")
         self.executor_kind = executor
@@ -130,16 +128,14 @@ class InProcessGraph:
             if spec.executable == "simulator":
                 self.simulator = node
         use_sim_time = self.simulator is not None
-        sweep = self.executor_kind in _SWEEPS
+        sweep = self.executor_kind in ("sweep", "sweep-info-dds", "sweep-dds", "sweep-copy")
         self.recorder = Recorder(self.context, topics, use_sim_time=use_sim_time, live_view=self.live_view,
                                  spin=not sweep)
         if sweep:
             self._sweep = SweepExecutor(share_messages=self.executor_kind != "sweep-copy",
-                                        intra_process=self.executor_kind in ("sweep", "sweep-info-dds",
-                                                                             "sweep-full"),
+                                        intra_process=self.executor_kind in ("sweep", "sweep-info-dds"),
                                         verify=self.verify_delivery,
-                                        route_message_info=self.executor_kind != "sweep-info-dds",
-                                        skip_idle_nodes=self.executor_kind != "sweep-full")
+                                        route_message_info=self.executor_kind != "sweep-info-dds")
             for node in [*self.nodes, self.recorder]:
                 if node is not self.simulator:
                     self._sweep.add_node(node)

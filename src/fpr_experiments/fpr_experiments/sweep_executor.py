@@ -71,15 +71,12 @@ class SweepExecutor:
     MAX_SWEEPS = 10_000
 
     def __init__(self, share_messages: bool = True, intra_process: bool = True, verify: bool = False,
-                 outside_check_every: int = 10, route_message_info: bool = True,
-                 skip_idle_nodes: bool = True) -> None:
+                 outside_check_every: int = 10, route_message_info: bool = True) -> None:
         """``share_messages``: one Python message per received message for all subscribers (else one each, as
         rclpy). ``intra_process``: deliver among the graph's nodes without DDS (:mod:`fpr_experiments.intra_process`;
         nodes added with :meth:`add_publisher_node` publish in process too; ``verify``: check that no message
         changes after it was published; ``outside_check_every``: drains between two looks for endpoints outside the
-        graph; ``route_message_info``: route the topics whose callbacks take MessageInfo too; IntraProcessRouter;
-        ``skip_idle_nodes``: pass over the subscriptions of a node with nothing for them, :meth:`_sweep`)."""
-        self.skip_idle_nodes = skip_idle_nodes
+        graph; ``route_message_info``: route the topics whose callbacks take MessageInfo too; IntraProcessRouter)."""
         self.share_messages = share_messages
         self.router = IntraProcessRouter(verify=verify, check_every=outside_check_every,
                                          route_message_info=route_message_info) if intra_process else None
@@ -145,20 +142,6 @@ class SweepExecutor:
                            [(sub, sub._callback_type is Subscription.CallbackType.MessageOnly, route_of(sub))
                             for sub in node.subscriptions],
                            list(node.services)) for node in self._nodes]
-        # what a sweep reads per node, looked up once: each timer's rcl handle methods; each subscription with its
-        # route's queue; the node's routed queues and routes, and whether it has a subscription outside routing
-        self._plan = []
-        for timers, subscriptions, _ in self._entities:
-            routes = tuple(route for _, _, route in subscriptions if route is not None)
-            self._plan.append(([(timer, timer.handle.is_timer_ready, timer.handle.call_timer) for timer in timers],
-                               [(sub, message_only, route, route.queue if route is not None else None)
-                                for sub, message_only, route in subscriptions],
-                               tuple(route.queue for route in routes), routes,
-                               len(routes) < len(subscriptions)))
-        #: per node: DDS may hold something for one of its routes (Route.dds); cleared when none does, set again
-        #: for every node when a topic falls back to DDS (the only way a route's flag turns True again)
-        self._dds_possible = [True] * len(self._plan)
-        self._fallbacks_seen = len(self.router.fallbacks) if self.router is not None else 0
         self._signature = self._current_signature()
 
     def drain(self, errors: list[str]) -> int:
@@ -166,9 +149,6 @@ class SweepExecutor:
             self._refresh()
         if self.router is not None:
             self.router.check_outside()
-            if len(self.router.fallbacks) != self._fallbacks_seen:
-                self._fallbacks_seen = len(self.router.fallbacks)
-                self._dds_possible = [True] * len(self._plan)
         done = self._serve_services(errors)
         try:
             for _ in range(self.MAX_SWEEPS):
@@ -182,27 +162,17 @@ class SweepExecutor:
                            "callbacks): a callback keeps making itself ready")
 
     def _sweep(self, errors: list[str]) -> int:
-        """One sweep (module doc). A node whose subscriptions are all routed, with nothing queued for them and
-        nothing possibly in DDS for them, is passed over after its timers: what its subscription loop would do
-        then is nothing (every route skipped), so the order of the callbacks is the same."""
         ran = 0
-        dds_possible = self._dds_possible
-        skip = self.skip_idle_nodes
-        for index, (timers, subscriptions, queues, routes, unrouted) in enumerate(self._plan):
-            for timer, ready, call in timers:
-                if ready():
-                    call()
+        for timers, subscriptions, _ in self._entities:
+            for timer in timers:
+                handle = timer.handle
+                if handle.is_timer_ready():
+                    handle.call_timer()
                     ran += 1
                     _run(timer.callback, (), errors)
-            if not unrouted and skip and not any(queues):
-                if not dds_possible[index]:
-                    continue
-                if not any(route.dds for route in routes):
-                    dds_possible[index] = False
-                    continue
-            for subscription, message_only, route, queue in subscriptions:
+            for subscription, message_only, route in subscriptions:
                 if route is not None:  # in process (message-only callbacks)
-                    if not queue and not route.dds:
+                    if not route.queue and not route.dds:
                         continue
                     item = route.take()
                     if item is None:
