@@ -60,10 +60,18 @@ def _stamp(t: float) -> Time:
 SENSOR_PUBLISHER_QOS = 10
 
 
+def _floats(values) -> list:
+    """Plain Python floats of a numpy array (one ``tolist``, nested for 2-D: the same numbers as ``float()`` of
+    each element, without a numpy scalar per element) or of a sequence."""
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return values.tolist()
+    return np.asarray(values, dtype=float).tolist()
+
+
 def _pose(position, quat_wxyz) -> Pose:
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return Pose(position=Point(x=float(position[0]), y=float(position[1]), z=float(position[2])),
-                orientation=Quaternion(x=x, y=y, z=z, w=w))
+    px, py, pz = _floats(position)
+    w, x, y, z = _floats(quat_wxyz)
+    return Pose(position=Point(x=px, y=py, z=pz), orientation=Quaternion(x=x, y=y, z=z, w=w))
 
 
 #: [s] wall: while the lockstep waits, /clock is re-published this often (SimulatorNode._on_lockstep_wait)
@@ -391,17 +399,21 @@ class SimulatorNode(Node):
         msg.header.stamp = _stamp(truth.time)
         msg.header.frame_id = "world"
         msg.platform_pose = _pose(s.position, s.quat)
-        msg.platform_twist.linear = Vector3(x=float(s.velocity[0]), y=float(s.velocity[1]), z=float(s.velocity[2]))
-        msg.platform_twist.angular = Vector3(x=float(s.rate[0]), y=float(s.rate[1]), z=float(s.rate[2]))
-        msg.leg_angles = [float(v) for v in s.leg_angles]
-        msg.leg_rates = [float(v) for v in s.leg_rates]
-        msg.uav_poses = [_pose(p, q) for p, q in zip(truth.uav_positions, truth.uav_quats, strict=True)]
-        msg.uav_velocities = [Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2])) for v in truth.uav_velocities]
-        msg.uav_thrusts = [float(v) for v in truth.uav_thrusts]
-        msg.external_wrench = [float(v) for v in truth.external_wrench]
+        vx, vy, vz = _floats(s.velocity)
+        msg.platform_twist.linear = Vector3(x=vx, y=vy, z=vz)
+        wx, wy, wz = _floats(s.rate)
+        msg.platform_twist.angular = Vector3(x=wx, y=wy, z=wz)
+        msg.leg_angles = _floats(s.leg_angles)
+        msg.leg_rates = _floats(s.leg_rates)
+        msg.uav_poses = [Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quaternion(x=q[1], y=q[2], z=q[3],
+                                                                                              w=q[0]))
+                         for p, q in zip(_floats(truth.uav_positions), _floats(truth.uav_quats), strict=True)]
+        msg.uav_velocities = [Vector3(x=v[0], y=v[1], z=v[2]) for v in _floats(truth.uav_velocities)]
+        msg.uav_thrusts = _floats(truth.uav_thrusts)
+        msg.external_wrench = _floats(truth.external_wrench)
         msg.contact_force = float(truth.contact_force)
         msg.payload_mass = float(truth.payload_mass)
-        msg.battery_voltages = [float(v) for v in truth.battery_voltages]
+        msg.battery_voltages = _floats(truth.battery_voltages)
         return msg
 
     def _target_message(self, t: float) -> PoseStamped:
