@@ -12,7 +12,9 @@ Prints one line per case (wall, CPU, RTF, CPU per simulated second and, for the 
 its split into the simulator's steps — physics, sensors, rendering, publishing — and the rest of the graph (thread
 CPU time, ``InProcessGraph(measure_periods=True)``), the controllers' step in the graph: median and 95th percentile
 of their 50 Hz timer callback, lockstep timeouts, the executor's entity count, the machine's load average before and
-after) and the ratios of each lever against the baseline of its case.
+after) and the ratios of each lever against the baseline of its case; then :func:`summary`: the mean RTF of every
+lever run more than once and, with levers 6 and 7 (e.g. ``--levers 6,7,6,7,6,7``), issue 11's figure, the hardware
+profile's cost.
 
 ``--overlap`` compares issue 15's overlapped two-process layout (fpr_experiments.overlapped: the simulator in a
 process of its own, one /clock period ahead of the graph) with what it could give at best: the default runner is
@@ -242,6 +244,7 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f}", flush=True)
     print(f"# probe: bench_control's n = 3 C step before / after each run, median of 1000 calls "
           f"({REFERENCE_STEP_US:.0f} us on the reference VM)", flush=True)
+    runs: list[tuple[str, str, float]] = []  # (case, lever, RTF) of every run, for the summary
     for case in args.cases.split(","):
         baseline = None
         for name, (deterministic, lean, clock_rate, realism, executor, *extra) in levers:
@@ -263,6 +266,39 @@ def main() -> None:
                   f"controller step {r['tick_median_us']:4.0f} us (p95 {r['tick_p95_us']:4.0f})  "
                   f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
                   flush=True)
+            runs.append((case, name, r["rtf"]))
+    for line in summary(runs):
+        print(line, flush=True)
+
+
+#: the levers whose RTFs give issue 11's figure: the hardware profile's cost against the default
+IDEAL_LEVER, HARDWARE_LEVER = ("deterministic, lean + /clock 100 Hz, sweep executor (default)",
+                               "default + hardware realism")
+
+
+def summary(runs: list[tuple[str, str, float]]) -> list[str]:
+    """Lines after the runs: the mean RTF of every (case, lever) run more than once, and per case with runs of both
+    the default and the hardware profile, issue 11's figure: the cost ``1 − mean hardware RTF / mean ideal RTF``,
+    with its range over the pairs in run order (the i-th ideal run with the i-th hardware run)."""
+    lines = []
+    by_lever: dict[tuple[str, str], list[float]] = {}
+    for case, lever, rtf in runs:
+        by_lever.setdefault((case, lever), []).append(rtf)
+    for (case, lever), rtfs in by_lever.items():
+        if len(rtfs) > 1:
+            lines.append(f"# mean RTF {case} {lever}: {sum(rtfs) / len(rtfs):.2f} over {len(rtfs)} runs "
+                         f"({min(rtfs):.2f}-{max(rtfs):.2f})")
+    for case in dict.fromkeys(case for case, _, _ in runs):
+        ideal, hardware = by_lever.get((case, IDEAL_LEVER)), by_lever.get((case, HARDWARE_LEVER))
+        if not ideal or not hardware:
+            continue
+        cost = 1.0 - (sum(hardware) / len(hardware)) / (sum(ideal) / len(ideal))
+        pairs = [1.0 - h / i for i, h in zip(ideal, hardware, strict=False)]
+        lines.append(f"# hardware profile's cost (issue 11: at most 20 %) {case}: {100 * cost:.0f} % "
+                     f"(mean RTF {sum(ideal) / len(ideal):.2f} ideal over {len(ideal)} runs, "
+                     f"{sum(hardware) / len(hardware):.2f} hardware over {len(hardware)}; pairs "
+                     f"{100 * min(pairs):.0f}-{100 * max(pairs):.0f} %)")
+    return lines
 
 
 def overlap(cases: list[str], seconds: float) -> None:
