@@ -62,7 +62,7 @@ def _can_make_a_namespace_with_a_link() -> bool:
 
 @pytest.mark.skipif(not _can_make_a_namespace_with_a_link(),
                     reason="needs `unshare -n` and `ip link add … type veth` (root) to build a namespace with a link")
-def test_isolated_sh_does_not_trust_an_inherited_flag_where_a_link_exists():
+def test_isolated_sh_does_not_trust_an_inherited_flag_where_a_link_exists(tmp_path):
     """FPR_IN_NETNS=1 set by hand (or inherited) in a namespace that has a link besides loopback: isolated.sh still
     moves the command into a private namespace with loopback only (before, the flag alone skipped the unshare)."""
     script = os.path.join(ROOT, "scripts", "isolated.sh")
@@ -70,8 +70,9 @@ def test_isolated_sh_does_not_trust_an_inherited_flag_where_a_link_exists():
         ["unshare", "-n", "sh", "-c", "ip link add fprv0 type veth peer name fprv1 && "
          f"FPR_IN_NETNS=1 bash {script} sh -c 'cat /proc/self/net/dev; echo FLAG=$FPR_IN_NETNS'"],
         capture_output=True, text=True, check=True, timeout=60)
-    interfaces = {line.split(":", 1)[0].strip() for line in result.stdout.splitlines()[2:] if ":" in line}
-    assert interfaces == {"lo"}, result.stdout
+    seen = tmp_path / "net_dev"
+    seen.write_text(result.stdout)
+    assert network_interfaces(str(seen)) == {"lo"}, result.stdout
     assert "FLAG=1" in result.stdout
 
 

@@ -202,7 +202,7 @@ def node_seconds(node) -> float:
     rcl time under the clock's handle guard and wraps it in a ``Time`` (argument checks, ~2 µs); this reads it the
     same way without the wrapper, through ``Clock.handle`` (which rclpy calls internal: a clock without it falls
     back to ``now()``). The nodes read their clock ~9,000 times per simulated second in the n = 6 graph (issue 15:
-    2.5 % of its CPU)."""
+    ×1.02 on its real-time factor, docs/benchmarks.md)."""
     clock = node.get_clock()
     handle = getattr(clock, "handle", None)
     if handle is None:

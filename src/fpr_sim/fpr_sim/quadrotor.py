@@ -34,7 +34,7 @@ from fpr_model.rotations import quat_error
 from fpr_sim._kernels import QuadKernel, resolve_kernel
 from fpr_sim.scenario import BatteryConfig, Px4Config, QuadrotorConfig, per_uav
 
-__all__ = ["AttitudeCommand", "Battery", "QuadrotorFleet", "mix"]
+__all__ = ["AttitudeCommand", "Battery", "QuadrotorFleet", "mix", "plain_floats"]
 
 
 @dataclass
@@ -59,9 +59,9 @@ class Battery:
         self._current = [0.0] * n
 
     charge_used = property(lambda self: np.array(self._charge_used),
-                           lambda self, value: setattr(self, "_charge_used", _floats(value)))
+                           lambda self, value: setattr(self, "_charge_used", plain_floats(value)))
     current = property(lambda self: np.array(self._current),
-                       lambda self, value: setattr(self, "_current", _floats(value)))
+                       lambda self, value: setattr(self, "_current", plain_floats(value)))
 
     def open_circuit_voltage(self) -> np.ndarray:
         """[V]: linear from full to empty over the capacity, then constant."""
@@ -80,7 +80,7 @@ class Battery:
     def update(self, thrust, dt: float) -> None:
         """Draw ``current_per_newton · thrust`` [A] during ``dt`` [s]; ``thrust`` (n,) [N]."""
         k = self.config.current_per_newton
-        self._current = current = [k * max(t, 0.0) for t in _floats(thrust)]
+        self._current = current = [k * max(t, 0.0) for t in plain_floats(thrust)]
         self._charge_used = [q + i * dt / 3600.0 for q, i in zip(self._charge_used, current, strict=True)]
 
 
@@ -91,7 +91,7 @@ def mix(collective: np.ndarray, moments: np.ndarray, arm: float, kappa: float, r
     airmode off (the default): the collective is never raised above the command; see :func:`mix_one`.
     """
     return np.array([mix_one(f, m, arm, kappa, top) for f, m, top in
-                     zip(_floats(collective), np.asarray(moments, dtype=float).tolist(), _floats(rotor_max),
+                     zip(plain_floats(collective), np.asarray(moments, dtype=float).tolist(), plain_floats(rotor_max),
                          strict=True)]).reshape(-1, 4)
 
 
@@ -260,9 +260,9 @@ class QuadrotorFleet:
         """Set rotors (and their commands) to produce ``thrust`` [N] (n,) with zero moment (initial hover); with
         per-rotor thrust ``gains`` (n, 4) each rotor state is ``T/4 / k_ij`` (the produced thrusts are equal)."""
         if gains is None:
-            self._rotors = [[0.25 * t] * 4 for t in _floats(thrust)]
+            self._rotors = [[0.25 * t] * 4 for t in plain_floats(thrust)]
         else:
-            self._rotors = [[0.25 * t / k for k in row] for t, row in zip(_floats(thrust), gains, strict=True)]
+            self._rotors = [[0.25 * t / k for k in row] for t, row in zip(plain_floats(thrust), gains, strict=True)]
         self._rotor_commands = [list(r) for r in self._rotors]
 
     # ----------------------------------------------------------------------------------------------
@@ -295,7 +295,7 @@ class QuadrotorFleet:
         errors = quat_error(np.array(self._quat), command.quat).tolist()
         feedforward = None if command.rate_feedforward is None else _rows(command.rate_feedforward)
         armed = np.asarray(command.armed, dtype=bool).tolist()
-        thrusts = _floats(command.thrust)
+        thrusts = plain_floats(command.thrust)
         gains = (self.attitude_p.tolist(), self.rate_p.tolist(), self.rate_i.tolist(), self.rate_d.tolist(),
                  self.max_rate.tolist())
         attitude_p, rate_p, rate_i, rate_d, max_rate = gains
@@ -414,8 +414,9 @@ def _rows(value) -> list[list[float]]:
     return np.asarray(value, dtype=float).tolist()
 
 
-def _floats(value) -> list[float]:
-    """A 1-D array-like (or scalar) as a list of floats."""
+def plain_floats(value) -> list:
+    """An array-like (or scalar) as plain Python floats: a list for 1-D (a scalar gives one), a list of lists for
+    2-D; the same numbers as ``float()`` of each element, without a numpy scalar per element."""
     return np.atleast_1d(np.asarray(value, dtype=float)).tolist()
 
 

@@ -43,6 +43,7 @@ from fpr_sim._kernels import kernel_summary
 from fpr_sim.cameras import CameraRig
 from fpr_sim.plant import GroundTruth
 from fpr_sim.px4_log import Px4Log
+from fpr_sim.quadrotor import plain_floats
 from fpr_sim.scenario import load_scenario, realism_profiles
 from fpr_sim.sensors import DelayLine, MotionCapture
 from fpr_sim.simulation import Simulation, SimulationOptions
@@ -60,17 +61,9 @@ def _stamp(t: float) -> Time:
 SENSOR_PUBLISHER_QOS = 10
 
 
-def _floats(values) -> list:
-    """Plain Python floats of a numpy array (one ``tolist``, nested for 2-D: the same numbers as ``float()`` of
-    each element, without a numpy scalar per element) or of a sequence."""
-    if isinstance(values, np.ndarray) and values.dtype == np.float64:
-        return values.tolist()
-    return np.asarray(values, dtype=float).tolist()
-
-
 def _pose(position, quat_wxyz) -> Pose:
-    px, py, pz = _floats(position)
-    w, x, y, z = _floats(quat_wxyz)
+    px, py, pz = plain_floats(position)
+    w, x, y, z = plain_floats(quat_wxyz)
     return Pose(position=Point(x=px, y=py, z=pz), orientation=Quaternion(x=x, y=y, z=z, w=w))
 
 
@@ -399,21 +392,21 @@ class SimulatorNode(Node):
         msg.header.stamp = _stamp(truth.time)
         msg.header.frame_id = "world"
         msg.platform_pose = _pose(s.position, s.quat)
-        vx, vy, vz = _floats(s.velocity)
+        vx, vy, vz = plain_floats(s.velocity)
         msg.platform_twist.linear = Vector3(x=vx, y=vy, z=vz)
-        wx, wy, wz = _floats(s.rate)
+        wx, wy, wz = plain_floats(s.rate)
         msg.platform_twist.angular = Vector3(x=wx, y=wy, z=wz)
-        msg.leg_angles = _floats(s.leg_angles)
-        msg.leg_rates = _floats(s.leg_rates)
+        msg.leg_angles = plain_floats(s.leg_angles)
+        msg.leg_rates = plain_floats(s.leg_rates)
         msg.uav_poses = [Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quaternion(x=q[1], y=q[2], z=q[3],
                                                                                               w=q[0]))
-                         for p, q in zip(_floats(truth.uav_positions), _floats(truth.uav_quats), strict=True)]
-        msg.uav_velocities = [Vector3(x=v[0], y=v[1], z=v[2]) for v in _floats(truth.uav_velocities)]
-        msg.uav_thrusts = _floats(truth.uav_thrusts)
-        msg.external_wrench = _floats(truth.external_wrench)
+                         for p, q in zip(plain_floats(truth.uav_positions), plain_floats(truth.uav_quats), strict=True)]
+        msg.uav_velocities = [Vector3(x=v[0], y=v[1], z=v[2]) for v in plain_floats(truth.uav_velocities)]
+        msg.uav_thrusts = plain_floats(truth.uav_thrusts)
+        msg.external_wrench = plain_floats(truth.external_wrench)
         msg.contact_force = float(truth.contact_force)
         msg.payload_mass = float(truth.payload_mass)
-        msg.battery_voltages = _floats(truth.battery_voltages)
+        msg.battery_voltages = plain_floats(truth.battery_voltages)
         return msg
 
     def _target_message(self, t: float) -> PoseStamped:
