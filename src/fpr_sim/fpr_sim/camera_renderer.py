@@ -14,9 +14,11 @@ Per-frame realism effects (:class:`FrameEffects`, drawn by :mod:`fpr_sim.cameras
 meets them: an occluding band over the marker (a leg or its shadow), motion blur along the image motion during
 the exposure (a line kernel on the marker's region only), the optical blur, then the photometric gain and offset
 (a 256-entry table), the lighting gradient and the sensor noise on float32 grey levels, rounded to uint8 in the
-noise's addition (OpenCV's saturating add: half to even, clipped). Without
-effects the image is bit-identical to the effect-free renderer. The band and the optical blur work on the region
-they can change (the rest of the frame is the uniform background, which a blur leaves as it is): the same pixels as
+noise's addition (OpenCV's saturating add: half to even, clipped). Without effects the image is bit-identical to
+the effect-free renderer. That last pass (table, gradient, noise, rounding) runs in the compiled kernel when it is
+available (:class:`fpr_sim._kernels.FrameKernel`, one pass, the same bits; ``kernel=`` / ``$FPR_SIM_KERNEL`` as
+for the plant), else in numpy/OpenCV (the reference). The band and the optical blur work on the region they can
+change (the rest of the frame is the uniform background, which a blur leaves as it is): the same pixels as
 whole-frame operations (``test_render_regions.py`` keeps the former code as its reference).
 
 :func:`emulate_relative_pose` gives the MOCAP-emulated relative pose of thesis §4.4.1: the true ``p_T_b`` with
@@ -31,6 +33,8 @@ import cv2
 import numpy as np
 from fpr_model.calibration import CameraModel, aruco_dictionary, invert_transform, make_transform
 from fpr_model.rotations import quat_from_rotvec, quat_to_rotmat
+
+from fpr_sim._kernels import FrameKernel, resolve_kernel
 
 __all__ = ["FrameEffects", "MarkerRenderer", "RenderResult", "emulate_relative_pose", "motion_blur_kernel"]
 
@@ -96,12 +100,15 @@ class MarkerRenderer:
     scene. pixels_per_cell: resolution of the finest texture (mip levels are derived by halving).
     noise_seed: seed of the pixel-noise bank (see :meth:`render`). supersampling: s x s samples per pixel,
     averaged (pixel-area integration; 1 = point sampling, whose aliasing moves edges by up to ~0.3 px).
+    kernel: the frame's last pass in 'compiled' C or 'python' (numpy/OpenCV); None: ``$FPR_SIM_KERNEL`` (default
+    'auto': compiled when built). The same images either way.
     """
 
     def __init__(self, camera: CameraModel | None = None, marker_size: float = 0.109,
                  dictionary: str = "DICT_ARUCO_MIP_36H12", marker_id: int = 0,
                  quiet_zone_cells: float = 1.0, background: int = 110, pixels_per_cell: int = 32,
-                 near_clip: float = 0.02, noise_seed: int = 0, supersampling: int = 4) -> None:
+                 near_clip: float = 0.02, noise_seed: int = 0, supersampling: int = 4,
+                 kernel: str | None = None) -> None:
         self.camera = camera if camera is not None else CameraModel()
         if not marker_size > 0.0:
             raise ValueError(f"marker_size must be positive, got {marker_size}")
@@ -135,6 +142,9 @@ class MarkerRenderer:
         self._noise_bank_sigma = 0.0
         self._gradient_buffer: np.ndarray | None = None
         self._gradient_axes: tuple[np.ndarray, np.ndarray] | None = None
+        #: 'compiled' or 'python': where the frame's last pass runs
+        self.kernel = resolve_kernel(kernel)
+        self._frame_kernel = FrameKernel() if self.kernel == "compiled" else None
 
     # ----------------------------------------------------------------------------------------------------
     def _project(self, points_camera: np.ndarray) -> np.ndarray:
@@ -182,7 +192,12 @@ class MarkerRenderer:
             if x1 > x0 and y1 > y0:
                 image[y0:y1, x0:x1] = cv2.GaussianBlur(image[y0:y1, x0:x1], (0, 0), float(blur_sigma))
         photometric = effects is not None and effects.photometric
-        if noise_sigma > 0.0 or photometric:
+        if (noise_sigma > 0.0 or photometric) and self._frame_kernel is not None:
+            table, row_terms, column_terms = self._photometric_terms(effects) if photometric else (None, None, None)
+            noise = self._noise_patch(rng if rng is not None else np.random.default_rng(0), noise_sigma) \
+                if noise_sigma > 0.0 else None
+            image = self._frame_kernel.finish(image, table, row_terms, column_terms, noise)
+        elif noise_sigma > 0.0 or photometric:
             noisy = self._photometric(image, effects) if photometric else image.astype(np.float32)
             if noise_sigma > 0.0:
                 rng = rng if rng is not None else np.random.default_rng(0)
@@ -232,29 +247,39 @@ class MarkerRenderer:
             touched = _union(touched, (x0, y0, x1, y1))
         return touched
 
-    def _photometric(self, image: np.ndarray, effects: FrameEffects) -> np.ndarray:
-        """The float32 grey levels ``gain·I + offset + a·x̂ + b·ŷ`` of the uint8 ``image`` (see
-        :class:`FrameEffects`). Gain and offset go through a 256-entry table of the same float32 operations
-        (``np.float32(I)·gain + offset``, the same bits as on each pixel) in one pass (cv2.LUT)."""
+    def _photometric_terms(self, effects: FrameEffects) -> tuple[np.ndarray | None, np.ndarray | None,
+                                                                    np.ndarray | None]:
+        """The photometric change of :class:`FrameEffects` as float32 pieces: the 256-entry table of
+        ``np.float32(I)·gain + offset`` (None when gain 1 and offset 0) and the gradient's row terms ``b·ŷ``
+        (height,) and column terms ``a·x̂`` (width,) (None, None without gradient)."""
+        table = None
         if effects.gain != 1.0 or effects.offset != 0.0:
             table = np.arange(256, dtype=np.float32)
             if effects.gain != 1.0:
                 table *= np.float32(effects.gain)
             if effects.offset != 0.0:
                 table += np.float32(effects.offset)
-            pixels = cv2.LUT(image, table)
-        else:
-            pixels = image.astype(np.float32)
-        if effects.gradient is not None and np.any(effects.gradient):
-            height, width = pixels.shape
+        if effects.gradient is None or not np.any(effects.gradient):
+            return table, None, None
+        if self._gradient_axes is None:
+            width, height = self.camera.width, self.camera.height
+            self._gradient_axes = ((np.arange(width, dtype=np.float32) - 0.5 * width) / width,
+                                   (np.arange(height, dtype=np.float32) - 0.5 * height) / height)
+        xs, ys = self._gradient_axes
+        a, b = (np.float32(v) for v in effects.gradient)
+        return table, b * ys, a * xs
+
+    def _photometric(self, image: np.ndarray, effects: FrameEffects) -> np.ndarray:
+        """The float32 grey levels ``gain·I + offset + a·x̂ + b·ŷ`` of the uint8 ``image`` (see
+        :class:`FrameEffects`, :meth:`_photometric_terms`): the table in one pass (cv2.LUT), then the gradient's
+        outer sum (the reference of the compiled :class:`~fpr_sim._kernels.FrameKernel`)."""
+        table, row_terms, column_terms = self._photometric_terms(effects)
+        pixels = cv2.LUT(image, table) if table is not None else image.astype(np.float32)
+        if row_terms is not None:
             if self._gradient_buffer is None or self._gradient_buffer.shape != pixels.shape:
-                self._gradient_axes = ((np.arange(width, dtype=np.float32) - 0.5 * width) / width,
-                                       (np.arange(height, dtype=np.float32) - 0.5 * height) / height)
                 self._gradient_buffer = np.empty(pixels.shape, dtype=np.float32)
-            xs, ys = self._gradient_axes
-            a, b = (np.float32(v) for v in effects.gradient)
             # into a buffer kept from frame to frame: a fresh 1.2 MB array per frame cost its page faults
-            pixels += np.add.outer(b * ys, a * xs, out=self._gradient_buffer)
+            pixels += np.add.outer(row_terms, column_terms, out=self._gradient_buffer)
         return pixels
 
     def _noise_patch(self, rng: np.random.Generator, sigma: float) -> np.ndarray:

@@ -16,10 +16,19 @@
  *
  * Units SI; world frame ENU; platform body frame Fp; quadrotor body frames FLU; quaternions [w, x, y, z].
  * Build: compiled by setup.py as an optional extension (plain shared library); never required.
+ *
+ * One more function, not of the plant: fpr_frame_finish, the last pass of a rendered camera frame
+ * (fpr_sim/camera_renderer.py, MarkerRenderer.render: photometric table, lighting gradient, sensor noise, rounding
+ * to uint8), the same float32 operations in the same order (test/test_frame_kernel.py: bit for bit).
  */
 
 #include <math.h>
+#include <stdint.h>
+#include <stddef.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #if defined(__GNUC__)
 #define FPR_EXPORT __attribute__((visibility("default")))
@@ -28,7 +37,7 @@
 #endif
 
 /* Bumped whenever a struct, a buffer layout or a function signature changes (checked by the loader). */
-#define FPR_KERNEL_ABI 5
+#define FPR_KERNEL_ABI 6
 #define FPR_MAX_N 16
 #define FPR_MAX_N9 (6 + FPR_MAX_N)
 /* math.pi (M_PI is not C99) */
@@ -1137,6 +1146,67 @@ static int quad_control(const FprQuadModel *q, double *io, int has_feedforward)
     return FPR_OK;
 }
 
+/* ------------------------------------------------------------------------------------------- camera frames */
+
+/* One pixel of frame_finish: float32 p -> uint8 as OpenCV's saturate_cast (round half to even, clip to 0-255).
+ * Clipping p to [-1, 256] first changes no result and keeps the conversion in range. */
+static uint8_t frame_pixel(float p)
+{
+    p = p < -1.0f ? -1.0f : (p > 256.0f ? 256.0f : p);
+    p = rintf(p);  /* the current rounding mode: to nearest, ties to even (never changed by Python) */
+    return (uint8_t)(p <= 0.0f ? 0 : (p >= 255.0f ? 255 : (int)p));
+}
+
+/* MarkerRenderer.render's last pass (fpr_sim/camera_renderer.py) over a (height, width) uint8 frame, in place:
+ *   p = table[I] (float32; NULL: (float)I),  p = p + (row_terms[v] + column_terms[u])  (lighting gradient,
+ *   NULL: none),  p = p + noise[v * noise_stride + u]  (sensor noise window, NULL: none),  I' = round(p) in 0-255.
+ * The float32 operations of the Python path in its order (cv2.LUT, np.add.outer then +=, cv2.add to CV_8U), so
+ * the same bits. SSE2 where the compiler has it (x86-64 always), 16 pixels at a time; the scalar loop otherwise
+ * and for the row's tail: the same operations (no FMA contraction: -ffp-contract=off). */
+static void frame_finish(int height, int width, uint8_t *image, const float *table, const float *row_terms,
+                         const float *column_terms, const float *noise, int noise_stride)
+{
+    float identity[256];
+    if (table == NULL) {
+        for (int k = 0; k < 256; ++k)
+            identity[k] = (float)k;
+        table = identity;
+    }
+    for (int v = 0; v < height; ++v) {
+        uint8_t *row = image + (size_t)v * (size_t)width;
+        const float *row_noise = noise != NULL ? noise + (size_t)v * (size_t)noise_stride : NULL;
+        const float r = row_terms != NULL ? row_terms[v] : 0.0f;
+        int u = 0;
+#if defined(__SSE2__)
+        const __m128 low = _mm_set1_ps(-1.0f), high = _mm_set1_ps(256.0f), rv = _mm_set1_ps(r);
+        for (; u + 16 <= width; u += 16) {
+            __m128i quarter[4];
+            for (int k = 0; k < 4; ++k) {
+                const uint8_t *s = row + u + 4 * k;
+                __m128 p = _mm_setr_ps(table[s[0]], table[s[1]], table[s[2]], table[s[3]]);
+                if (column_terms != NULL)
+                    p = _mm_add_ps(p, _mm_add_ps(rv, _mm_loadu_ps(column_terms + u + 4 * k)));
+                if (row_noise != NULL)
+                    p = _mm_add_ps(p, _mm_loadu_ps(row_noise + u + 4 * k));
+                /* cvtps2dq rounds in the current mode (to nearest, ties to even) like rintf */
+                quarter[k] = _mm_cvtps_epi32(_mm_min_ps(_mm_max_ps(p, low), high));
+            }
+            /* int32 -> int16 -> uint8 with saturation: the clip to 0-255 */
+            _mm_storeu_si128((__m128i *)(row + u), _mm_packus_epi16(_mm_packs_epi32(quarter[0], quarter[1]),
+                                                                    _mm_packs_epi32(quarter[2], quarter[3])));
+        }
+#endif
+        for (; u < width; ++u) {
+            float p = table[row[u]];
+            if (column_terms != NULL)
+                p = p + (r + column_terms[u]);
+            if (row_noise != NULL)
+                p = p + row_noise[u];
+            row[u] = frame_pixel(p);
+        }
+    }
+}
+
 /* ------------------------------------------------------------------------------------------- exports */
 
 FPR_EXPORT int fpr_kernel_abi(void) { return FPR_KERNEL_ABI; }
@@ -1186,6 +1256,15 @@ FPR_EXPORT int fpr_quad_control(const FprQuadModel *q, double *io, int has_feedf
     if (q->n < 1 || q->n > FPR_MAX_N)
         return FPR_ERR_SIZE;
     return quad_control(q, io, has_feedforward);
+}
+
+FPR_EXPORT int fpr_frame_finish(int height, int width, uint8_t *image, const float *table, const float *row_terms,
+                                const float *column_terms, const float *noise, int noise_stride)
+{
+    if (height < 1 || width < 1 || (noise != NULL && noise_stride < width))
+        return FPR_ERR_SIZE;
+    frame_finish(height, width, image, table, row_terms, column_terms, noise, noise_stride);
+    return FPR_OK;
 }
 
 FPR_EXPORT int fpr_quad_step(const FprQuadModel *q, double *io, double dt, int has_factors)
