@@ -103,19 +103,22 @@ def platform_T_bodies_at(truth: GroundTruth, dt: float) -> list[np.ndarray]:
 
 class CameraRig:
     """One camera per UAV, nominal calibration ``calibration`` (what camera_info and the estimator use), true cameras
-    per :func:`draw_true_cameras`; deterministic for a seed."""
+    per :func:`draw_true_cameras`; deterministic for a seed. ``kernel``: where the renderers finish a frame
+    (:class:`fpr_sim.camera_renderer.MarkerRenderer`; None: ``$FPR_SIM_KERNEL``), the same images either way."""
 
-    def __init__(self, config: CameraConfig, n: int, seed: int, calibration: VisionCalibration | None = None) -> None:
+    def __init__(self, config: CameraConfig, n: int, seed: int, calibration: VisionCalibration | None = None,
+                 kernel: str | None = None) -> None:
         self.config = config
         self.calibration = calibration or VisionCalibration()
-        self.renderer = MarkerRenderer(self.calibration.camera, marker_size=self.calibration.marker_size)
+        self.renderer = MarkerRenderer(self.calibration.camera, marker_size=self.calibration.marker_size,
+                                       kernel=kernel)
         self.rngs = [np.random.default_rng(s) for s in np.random.SeedSequence([seed, 7]).spawn(n)]
         self.body_T_camera = self.calibration.body_T_camera
         self.platform_T_marker = self.calibration.platform_T_marker
         self.true_cameras = draw_true_cameras(config, self.calibration, n, seed)
         #: per UAV: the renderer of its true camera (the nominal renderer when the intrinsics are nominal)
         self.renderers = [self.renderer if tc.camera == self.calibration.camera else
-                          MarkerRenderer(tc.camera, marker_size=self.calibration.marker_size)
+                          MarkerRenderer(tc.camera, marker_size=self.calibration.marker_size, kernel=kernel)
                           for tc in self.true_cameras]
         self.effect_rngs = {name: [np.random.default_rng(s) for s in np.random.SeedSequence([seed, 8, k]).spawn(n)]
                             for k, name in enumerate(_EFFECT_STREAMS)}
