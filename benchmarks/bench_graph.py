@@ -59,7 +59,8 @@ CASES = {
 #: (fpr_experiments.sweep_executor; "sweep-copy": one conversion per subscription, as rclpy; "sweep-dds": every
 #: message through DDS instead of fpr_experiments.intra_process's in-process delivery); "hardware" compares
 #: the realism profiles on the default runner (issue 11: hardware <= 20 % cost); optionally node parameters
-#: {executable: {name: value}} (None: none) and OpenCV's dispatch (fpr_model.opencv_dispatch; default native)
+#: {executable: {name: value}} (None: none), OpenCV's dispatch (fpr_model.opencv_dispatch; default native), the
+#: layout ("one process" or "overlapped") and InProcessGraph keyword options (None: none)
 LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", "rclpy"),
           "threaded, lean nodes": (False, True, 250.0, "ideal", "rclpy"),
           "threaded, /clock 100 Hz": (False, False, 100.0, "ideal", "rclpy"),
@@ -97,7 +98,12 @@ LEVERS = {"threaded, full nodes, /clock 250 Hz": (False, False, 250.0, "ideal", 
           # the hardware profile with the ArUco detectors forgetting their region of interest at the first frame
           # without the marker (before roi_hold; compare with lever 7)
           "hardware realism, ArUco roi_hold 0": (True, True, 100.0, "hardware", "sweep",
-                                                 {"aruco_detector": {"roi_hold": 0}})}
+                                                 {"aruco_detector": {"roi_hold": 0}}),
+          # the default without keeping the graph's heap out of the garbage collector's full collections (as before
+          # InProcessGraph's freeze_heap; the last element: InProcessGraph keyword options)
+          "default, the garbage collector walking the whole heap": (True, True, 100.0, "ideal", "sweep", None,
+                                                                     "native", "one process",
+                                                                     {"freeze_heap": False})}
 
 
 #: [µs] bench_control's n = 3 communicating step, median, on the VM of docs/benchmarks.md's 2026-12-01 figures
@@ -189,7 +195,8 @@ def overlap_bound(period_costs: list[tuple[float, float, float]], control_rate: 
 def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seconds: float,
              realism: str = "ideal", executor: str = "sweep",
              measure_periods: bool = False, node_parameters: dict | None = None,
-             opencv_dispatch: str = "native", layout: str = "one process") -> dict:
+             opencv_dispatch: str = "native", layout: str = "one process",
+             graph_options: dict | None = None) -> dict:
     n, scenario, script, cameras = CASES[case]
     model = {}
     if n != 3:
@@ -204,7 +211,7 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
             (OverlappedGraph(describe_graph(options), recorded_topics(n)) if layout == "overlapped" else
              InProcessGraph(describe_graph(options), recorded_topics(n), lean=lean, deterministic=deterministic,
                             executor=executor if deterministic else None,
-                            measure_periods=measure_periods)) as graph:
+                            measure_periods=measure_periods, **(graph_options or {}))) as graph:
         graph.wait_for_discovery()
         ticks = _time_controller_ticks(graph)
         entities = _entities(graph)
@@ -253,7 +260,8 @@ def main() -> None:
             r = run_case(case, deterministic, lean, clock_rate, args.seconds, realism, executor,
                          measure_periods=deterministic and layout == "one process",
                          node_parameters=extra[0] if extra else None,
-                         opencv_dispatch=extra[1] if len(extra) > 1 else "native", layout=layout)
+                         opencv_dispatch=extra[1] if len(extra) > 1 else "native", layout=layout,
+                         graph_options=extra[3] if len(extra) > 3 else None)
             step_after = reference_step_us()
             baseline = baseline or r
             split = ""

@@ -12,13 +12,15 @@ nothing either: the same flight with a conversion per subscription ("sweep-copy"
 ground truth. Nor does the in-process delivery (fpr_experiments.intra_process, the default): the same flight with
 every message through DDS ("sweep-dds") gives the same ground truth, and the loaded flight runs with the delivery's
 check that no message changes after it was published (a publisher reusing its message, a subscriber modifying
-what it received: the run raises). Nor does the overlap benchmark's per-period CPU measurement. The overlapped
-two-process layout (fpr_experiments.overlapped) is deterministic under load too, and one /clock period of control
-latency away from the one-process flight.
+what it received: the run raises). Nor does the overlap benchmark's per-period CPU measurement, nor keeping the
+graph's objects out of the garbage collector's full collections (``gc.freeze``, InProcessGraph's default). The
+overlapped two-process layout (fpr_experiments.overlapped) is deterministic under load too, and one /clock period
+of control latency away from the one-process flight.
 """
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import time
 
@@ -58,12 +60,14 @@ def _fly(executor: str | None = None, verify_delivery: bool = False, overlapped:
         recording = graph.recorder.snapshot()
         assert graph.errors == []
         period_costs = np.array(graph.period_costs).reshape(-1, 3)
+        frozen_in_flight = gc.get_freeze_count()
+    frozen_after_close = gc.get_freeze_count()
     truth = flight_record(recording, 3).truth
     setpoints = np.array([[m.header.stamp.sec, m.header.stamp.nanosec, m.attitude.w, m.attitude.x, m.attitude.y,
                            m.attitude.z, m.thrust] for i in (1, 2, 3) for m in recording.get(f"/fpr/uav{i}/setpoint")])
     return {"t": truth.t, "position": truth.position, "quat": truth.quat, "legs": truth.legs,
             "thrusts": truth.thrusts, "uav_positions": truth.uav_positions, "setpoints": setpoints,
-            "period_costs": period_costs}
+            "period_costs": period_costs, "frozen": np.array([frozen_in_flight, frozen_after_close])}
 
 
 def _quiet_and_loaded(overlapped: bool = False) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -148,6 +152,17 @@ def test_period_measurement_changes_nothing(flights):
     assert len(costs) == round(100 * SECONDS)
     np.testing.assert_allclose(costs[:, 0], np.arange(1, len(costs) + 1) * 0.01, atol=1e-9)
     assert np.all(costs[:, 1:] >= 0.0) and costs[:, 1].sum() > 0.0 and costs[:, 2].sum() > 0.0
+
+
+def test_keeping_the_heap_from_the_garbage_collector_changes_nothing(flights):
+    """InProcessGraph freezes the collector's view of the graph's objects (and, each simulated second, of the
+    growing recording) and gives them back at close; without it, the same flight."""
+    quiet, _ = flights
+    frozen_in_flight, frozen_after_close = quiet["frozen"]
+    assert frozen_in_flight > 100_000 and frozen_after_close == 0
+    unfrozen = _fly(freeze_heap=False)
+    assert list(unfrozen["frozen"]) == [0, 0]
+    _assert_same_flight(quiet, unfrozen)
 
 
 # ---- the overlapped two-process layout (fpr_experiments.overlapped) ---------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import rclpy
+from fpr_model.node_parameters import settle_heap
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -12,7 +13,8 @@ LOG_THROTTLE_S = 2.0  # [s] per-cycle warnings: at most one per call site and pe
 
 
 def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
-    """The nodes' main(): init rclpy, build the node, spin until Ctrl-C / SIGTERM, shut down cleanly.
+    """The nodes' main(): init rclpy, build the node, settle the heap (fpr_model.node_parameters.settle_heap: no
+    garbage-collector pause walks the start-up's objects), spin until Ctrl-C / SIGTERM, shut down cleanly.
 
     A callback that races the shutdown (SIGINT/SIGTERM) and finds its context gone is not an error; any other
     exception propagates.
@@ -21,6 +23,7 @@ def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -
     node = None
     try:
         node = node_factory()
+        settle_heap()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -44,6 +44,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import rclpy
+from fpr_model.node_parameters import settle_heap
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -64,7 +65,7 @@ class InProcessGraph:
     def __init__(self, specs: Sequence[NodeSpec], topics: Sequence[Topic] = (), max_graph_lag: float = 0.1,
                  lean: bool = True, deterministic: bool = True, live_view=None, executor: str | None = None,
                  real_time_factor: float | None = None, verify_delivery: bool = False,
-                 measure_periods: bool = False) -> None:
+                 measure_periods: bool = False, freeze_heap: bool = True) -> None:
         """``executor``: "sweep" (in-process delivery), "sweep-info-dds" (in-process delivery but for the callbacks
         that take MessageInfo, through DDS: before fpr_experiments.intra_process numbered them itself), "sweep-dds"
         (the sweep with every message through DDS),
@@ -77,7 +78,9 @@ class InProcessGraph:
         ``verify_delivery`` (tests): the in-process delivery checks that no message changes after it was published
         (fpr_experiments.intra_process; it copies every message, slower). ``measure_periods`` (benchmarks,
         deterministic mode): :attr:`period_costs` gets one (simulation time [s], simulator CPU [s], graph CPU [s])
-        per /clock period, thread CPU time of the step and of the drains that follow it."""
+        per /clock period, thread CPU time of the step and of the drains that follow it. ``freeze_heap``: keep the
+        graph's objects out of the garbage collector's full collections (:meth:`_freeze_heap`; False: as before,
+        the same flight, tests/test_determinism.py)."""
         self.deterministic = deterministic
         if executor is None:
             executor = "sweep" if deterministic and lean else "rclpy"
@@ -89,6 +92,8 @@ class InProcessGraph:
         self.executor_kind = executor
         self.verify_delivery = verify_delivery
         self.measure_periods = measure_periods
+        self.freeze_heap = freeze_heap
+        self._frozen = False
         #: with ``measure_periods``: (simulation time [s], simulator CPU [s], graph CPU [s]) per /clock period
         self.period_costs: list[tuple[float, float, float]] = []
         self.live_view = live_view  #: fpr_experiments.live_view.LiveView the recorder forwards to, or None
@@ -153,8 +158,9 @@ class InProcessGraph:
         self._graph_clock_node = next(n for n in reversed(self.nodes) if n is not self.simulator)
         self._bridges = [node for spec, node in zip(self.specs, self.nodes, strict=True)
                          if spec.executable == "px4_bridge"]
-        gc.collect()  # the construction's garbage, once, before the first freeze (run_until's heap note)
-        self._freeze_heap()
+        if self.freeze_heap:
+            settle_heap()  # the construction's garbage collected once, then frozen (see _freeze_heap)
+            self._frozen = True
         if not self.deterministic:
             self._spinner = threading.Thread(target=self._spin, name="graph_executor", daemon=True)
             self._spinner.start()
@@ -271,7 +277,7 @@ class InProcessGraph:
             else:
                 self.simulator.step()
                 self._hold_for_graph(wall_deadline)
-            if self.sim_time >= next_freeze:  # what the last second added to the recording (_freeze_heap)
+            if self.freeze_heap and self.sim_time >= next_freeze:  # the last second's recording (_freeze_heap)
                 next_freeze += _FREEZE_PERIOD
                 self._freeze_heap()
             if progress is not None and self.sim_time >= next_progress - 1e-9:
@@ -299,7 +305,7 @@ class InProcessGraph:
 
     def close(self) -> None:
         self._running = False
-        if getattr(self, "_frozen", False):
+        if self._frozen:
             gc.unfreeze()  # collectable again: a process may build several graphs one after the other
             self._frozen = False
         if self._spinner is not None:

@@ -35,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     import rclpy
+    from fpr_model.node_parameters import settle_heap
     from rclpy.executors import SingleThreadedExecutor
 
     from fpr_experiments.node_factory import build_nodes
@@ -42,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
     nodes = build_nodes(specs[args.group], context, lean=args.lean)
+    settle_heap()  # no garbage-collector pause walks the start-up's objects (fpr_model.node_parameters)
     executor = SingleThreadedExecutor(context=context)
     for node in nodes:
         executor.add_node(node)

@@ -61,3 +61,31 @@ def test_apply_only_for_dynamic_parameters():
         table.declare("rate", Param(50.0, "rate"), apply=print)
     assert table.declare("gain", Param([1.0, 2.0], "gain", dynamic=True), apply=lambda v: None) == [1.0, 2.0]
     assert table.dynamic_names() == ["gain"]
+
+
+def test_settle_heap_freezes_what_is_alive_and_frees_nothing_it_should_not():
+    import gc
+    import weakref
+
+    from fpr_model.node_parameters import settle_heap
+
+    class Holder:
+        pass
+
+    kept, dropped = Holder(), Holder()
+    dropped.self_reference = dropped  # a reference cycle made before the call: garbage, collected by it
+    dropped_ref = weakref.ref(dropped)
+    del dropped
+    try:
+        settle_heap()
+        assert dropped_ref() is None
+        assert gc.get_freeze_count() > 1000  # the imports, the test session: out of the collector's sight
+        made_after = Holder()
+        made_after.self_reference = made_after
+        after_ref = weakref.ref(made_after)
+        del made_after
+        gc.collect()
+        assert after_ref() is None  # what is made afterwards is collected as usual
+        assert isinstance(kept, Holder)
+    finally:
+        gc.unfreeze()

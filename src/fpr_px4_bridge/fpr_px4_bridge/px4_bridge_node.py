@@ -21,7 +21,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from fpr_model.battery import thrust_coefficients
 from fpr_model.diagnostics import ERROR, OK, WARN, StatusReport, to_diagnostic_array
-from fpr_model.node_parameters import NodeParameters, Param, node_seconds
+from fpr_model.node_parameters import NodeParameters, Param, node_seconds, settle_heap
 from geometry_msgs.msg import TwistStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
@@ -494,6 +494,7 @@ def main(args=None) -> None:
     node = None
     try:
         node = Px4BridgeNode()
+        settle_heap()  # no garbage-collector pause walks the start-up's objects (fpr_model.node_parameters)
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

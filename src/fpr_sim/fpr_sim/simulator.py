@@ -25,7 +25,7 @@ import time
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
-from fpr_model.node_parameters import NodeParameters
+from fpr_model.node_parameters import NodeParameters, settle_heap
 from fpr_model.opencv_dispatch import ENVIRONMENT_VARIABLE, apply_opencv_dispatch
 from fpr_model.robot_description import robot_description
 from fpr_px4_bridge.link import load_signing_key
@@ -502,6 +502,7 @@ def main(args=None) -> None:
             print(f"[simulator] error: {error}", file=sys.stderr)
             status = 2
             return
+        settle_heap()  # no garbage-collector pause walks the start-up's objects (fpr_model.node_parameters)
         node.run()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
