@@ -38,6 +38,10 @@ def node_class(executable: str) -> type[Node]:
 
 
 _LEAN_CLASSES: dict[type, type] = {}
+#: the lean nodes' rcl arguments besides their spec's: rclpy's own read-only parameter switching the node's
+#: ``~/get_type_description`` service off (one service per node, polled at every drain of the deterministic runner
+#: although nothing in a simulation run asks it: ~1 % of the n = 6 graph's CPU, docs/benchmarks.md)
+LEAN_ROS_ARGS = ("--ros-args", "-p", "start_type_description_service:=false")
 
 
 def lean_class(cls: type[Node]) -> type[Node]:
@@ -66,12 +70,13 @@ def build_node(spec: NodeSpec, context, lean: bool = False) -> Node:
     """One node of ``spec`` in ``context`` (its parameters, name, namespace and remappings from its ros_args).
 
     ``lean`` (simulation runs): no parameter services (``ros2 param`` cannot reach the node; its parameters are the
-    description's) and no default QoS event handlers (:func:`lean_class`): the executor's wait set shrinks from
-    ~350 to ~70 entities for n = 3 (see docs/benchmarks.md)."""
+    description's), no type-description service (Jazzy's ``~/get_type_description``, REP 2011: tools asking a node
+    for its topics' type definitions; :data:`LEAN_ROS_ARGS`) and no default QoS event handlers (:func:`lean_class`):
+    the executor's wait set shrinks from ~350 to ~70 entities for n = 3 (see docs/benchmarks.md)."""
     cls = node_class(spec.executable)
     if lean:
-        node = lean_class(cls)(context=context, cli_args=spec.ros_args(), use_global_arguments=False,
-                               start_parameter_services=False)
+        node = lean_class(cls)(context=context, cli_args=[*spec.ros_args(), *LEAN_ROS_ARGS],
+                               use_global_arguments=False, start_parameter_services=False)
     else:
         node = cls(context=context, cli_args=spec.ros_args(), use_global_arguments=False)
     # rclpy ignores an override of a parameter the node does not declare: a misspelt one would fly unnoticed

@@ -100,9 +100,11 @@ class Recorder(Node):
         # swept by the caller (spin False): no default QoS event handlers, as the lean nodes it records (set before
         # Node.__init__, which creates the node's own publishers through create_publisher)
         self._without_event_handlers = not spin
+        # swept, it is as lean as the nodes: no type-description service either (node_factory.LEAN_ROS_ARGS)
+        lean = [Parameter("start_type_description_service", value=False)] if not spin else []
         super().__init__("experiment_recorder", context=context, use_global_arguments=False,
                          start_parameter_services=False,
-                         parameter_overrides=[Parameter("use_sim_time", value=use_sim_time)])
+                         parameter_overrides=[Parameter("use_sim_time", value=use_sim_time), *lean])
         self.topics = {t.name: t for t in topics}
         self.live_view = live_view
         self.lock = threading.Lock()

@@ -103,8 +103,33 @@ def test_every_variant_graph_builds_with_every_parameter_it_sets_declared(tmp_pa
             rclpy.init(context=context, args=[])
             try:
                 for node in build_nodes(specs, context, lean=True):
+                    # lean: no parameter or type-description services (nothing to poll in the drains)
+                    assert not list(node.services), [service.srv_name for service in node.services]
                     node.destroy_node()
                     built += 1
             finally:
                 context.try_shutdown()
     assert built > 300  # 31 variants, 13-22 nodes each
+
+
+def test_full_nodes_keep_their_services_for_the_tools():
+    """Built for the robot (not lean), a node answers ``ros2 param`` and type-description queries."""
+    import rclpy
+    from fpr_experiments.graph import describe_graph
+    from fpr_experiments.node_factory import build_node
+    from fpr_experiments.resources import SCENARIOS
+    from fpr_experiments.runner import graph_options
+
+    experiment = load_experiment("takeoff_landing")
+    specs = describe_graph(graph_options(experiment, experiment.variants[0], SCENARIOS.resolve(experiment.scenario),
+                                         "emulated", 3))
+    spec = next(s for s in specs if s.executable == "teleop")
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[])
+    try:
+        node = build_node(spec, context, lean=False)
+        names = {service.srv_name.rsplit("/", 1)[-1] for service in node.services}
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    assert {"get_type_description", "get_parameters", "set_parameters"} <= names
