@@ -62,9 +62,15 @@ SENSOR_PUBLISHER_QOS = 10
 
 
 def _pose(position, quat_wxyz) -> Pose:
-    px, py, pz = plain_floats(position)
-    w, x, y, z = plain_floats(quat_wxyz)
-    return Pose(position=Point(x=px, y=py, z=pz), orientation=Quaternion(x=x, y=y, z=z, w=w))
+    """A Pose of a position (3,) [m] and a quaternion [w, x, y, z] (array-likes)."""
+    return _pose_of_floats(plain_floats(position), plain_floats(quat_wxyz))
+
+
+def _pose_of_floats(position: list[float], quat_wxyz: list[float]) -> Pose:
+    """:func:`_pose` of plain Python floats (no conversion: the ground truth converts its arrays once)."""
+    w, x, y, z = quat_wxyz
+    return Pose(position=Point(x=position[0], y=position[1], z=position[2]), orientation=Quaternion(x=x, y=y, z=z,
+                                                                                                       w=w))
 
 
 #: [s] wall: while the lockstep waits, /clock is re-published this often (SimulatorNode._on_lockstep_wait)
@@ -398,9 +404,8 @@ class SimulatorNode(Node):
         msg.platform_twist.angular = Vector3(x=wx, y=wy, z=wz)
         msg.leg_angles = plain_floats(s.leg_angles)
         msg.leg_rates = plain_floats(s.leg_rates)
-        msg.uav_poses = [Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quaternion(x=q[1], y=q[2], z=q[3],
-                                                                                              w=q[0]))
-                         for p, q in zip(plain_floats(truth.uav_positions), plain_floats(truth.uav_quats), strict=True)]
+        msg.uav_poses = [_pose_of_floats(p, q) for p, q in zip(plain_floats(truth.uav_positions),
+                                                               plain_floats(truth.uav_quats), strict=True)]
         msg.uav_velocities = [Vector3(x=v[0], y=v[1], z=v[2]) for v in plain_floats(truth.uav_velocities)]
         msg.uav_thrusts = plain_floats(truth.uav_thrusts)
         msg.external_wrench = plain_floats(truth.external_wrench)
