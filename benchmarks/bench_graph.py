@@ -240,15 +240,26 @@ def main() -> None:
                         + "; ".join(f"{k} {name}" for k, name in enumerate(LEVERS)))
     parser.add_argument("--overlap", action="store_true", help="price the overlapped two-process layout (module "
                         "doc) instead of the levers")
+    parser.add_argument("--numeric-dispatch", choices=("native", "baseline"), default="native",
+                        help="numpy's, OpenBLAS's and libm's code (fpr_model.numeric_dispatch): 'native' (default, "
+                             "the figures before 2026-12-07's last session) or 'baseline', the pinned code the "
+                             "experiments fly (the benchmark starts itself again in it)")
     args = parser.parse_args()
+    if args.numeric_dispatch == "baseline":
+        from fpr_model.numeric_dispatch import reexec_pinned
+
+        reexec_pinned()
     if args.overlap:
         overlap(args.cases.split(","), args.seconds)
         return
     levers = list(LEVERS.items())
     if args.levers != "all":
         levers = [levers[int(k)] for k in args.levers.split(",")]
+    from fpr_model.numeric_dispatch import numeric_dispatch_in_effect, openblas_core
+
     print(f"# bench_graph: {args.seconds:.0f} s simulated per run, {os.cpu_count()} cores, load average "
-          f"{os.getloadavg()[0]:.2f}", flush=True)
+          f"{os.getloadavg()[0]:.2f}, numeric code {numeric_dispatch_in_effect()} (OpenBLAS {openblas_core()})",
+          flush=True)
     print(f"# probe: bench_control's n = 3 C step before / after each run, median of 1000 calls "
           f"({REFERENCE_STEP_US:.0f} us on the reference VM)", flush=True)
     runs: list[tuple[str, str, float]] = []  # (case, lever, RTF) of every run, for the summary

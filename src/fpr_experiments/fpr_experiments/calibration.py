@@ -314,6 +314,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"calibrate: --seeds takes integers and 'own', got {args.seeds}", file=sys.stderr)
         return 2
     if args.fly_one is not None:
+        from fpr_experiments.cli import pin_numeric_code
+
+        pin_numeric_code("baseline", entry_point=argv is None)  # the same flight on every CPU, as `run`
         return fly_one(args.fly_one)
     try:
         knobs = load_knobs(args.knobs or _default_knobs_path())

@@ -62,10 +62,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--live-view", type=int, nargs="?", const=8765, default=None, metavar="PORT",
                         help="serve each flight live to the Foxglove app over WebSocket on 127.0.0.1:PORT (default "
                              "8765; 0: any free port), the report MCAP's topics (fpr_experiments.live_view)")
-    parser.add_argument("--opencv-dispatch", choices=("baseline", "native"), default="baseline",
-                        help="OpenCV's SIMD code (fpr_model.opencv_dispatch): 'baseline' (default) renders and "
-                             "detects the same on every CPU, so an image flight is the same flight on every machine; "
-                             "'native' lets OpenCV pick the CPU's fastest code, as on the robot")
+    parser.add_argument("--cpu-dispatch", "--opencv-dispatch", choices=("baseline", "native"), default="baseline",
+                        dest="cpu_dispatch",
+                        help="the CPU-dependent code of OpenCV, numpy, OpenBLAS and libm (fpr_model.opencv_dispatch, "
+                             "fpr_model.numeric_dispatch): 'baseline' (default) pins the code every x86-64 CPU has, "
+                             "so a flight is the same flight on every machine (the run starts itself again with "
+                             "the numeric libraries pinned, once); 'native' lets each library pick the CPU's "
+                             "fastest code, as on the robot. --opencv-dispatch is the former name")
     parser.add_argument("--jobs", type=int, default=1,
                         help="with 'all': experiments flown in parallel, each in its own isolated process (its own "
                              "network namespace and ROS domain; 2 cores: 2); default 1")
@@ -105,8 +108,8 @@ def _experiment_flags(args) -> list[str]:
         tokens.append("--processes")
     if args.overlapped:
         tokens.append("--overlapped")
-    if args.opencv_dispatch != "baseline":
-        tokens += ["--opencv-dispatch", args.opencv_dispatch]
+    if args.cpu_dispatch != "baseline":
+        tokens += ["--cpu-dispatch", args.cpu_dispatch]
     return tokens
 
 
@@ -247,6 +250,8 @@ def run_main(argv: list[str] | None = None) -> int:
         from fpr_experiments.catalog import check_realism, load_experiment
         from fpr_experiments.network import say_isolation
 
+        pin_numeric_code(args.cpu_dispatch, entry_point=argv is None)
+
         say_isolation()  # where the flights' DDS traffic can go (a warning outside scripts/isolated.sh's namespace)
 
         if args.realism is not None:
@@ -272,7 +277,7 @@ def run_main(argv: list[str] | None = None) -> int:
                                     real_time_factor=args.real_time_factor, plots=not args.no_plots,
                                     realism=args.realism, live_view_port=args.live_view,
                                     scenario_overrides=overrides, parameter_overrides=parameters,
-                                    opencv_dispatch=args.opencv_dispatch, overlapped=args.overlapped)
+                                    opencv_dispatch=args.cpu_dispatch, overlapped=args.overlapped)
             if not result.passed:
                 status = 1
                 failed.append(name)
@@ -291,6 +296,21 @@ def run_main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+
+
+def pin_numeric_code(dispatch: str, entry_point: bool) -> None:
+    """``baseline``: make this process run numpy's, OpenBLAS's and libm's pinned code (fpr_model.numeric_dispatch).
+    They are chosen when they load, so the program starts itself again in the pinned environment, once, when it is
+    the program (``ros2 run``, ``python -m``, ``python -c "... run_main()"``); called in a process of somebody else's
+    (a test's ``run_main([...])``) it only says which code the flights run."""
+    from fpr_model.numeric_dispatch import numeric_dispatch_in_effect, reexec_pinned
+
+    if dispatch != "baseline" or numeric_dispatch_in_effect() == "baseline":
+        return
+    if entry_point:
+        reexec_pinned()
+    print("[fpr] numeric code: native in this process (run_main called in-process), so these flights may differ "
+          "in their last digits on another CPU; `ros2 run fpr_experiments run` pins it", flush=True)
 
 
 def _refused_parameter_line(error: Exception) -> str:

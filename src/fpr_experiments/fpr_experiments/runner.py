@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from fpr_model.numeric_dispatch import numeric_dispatch_in_effect
 from fpr_model.opencv_dispatch import opencv_dispatch as dispatch_context
 
 from fpr_experiments.catalog import Experiment, Variant, load_experiment
@@ -224,7 +225,7 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
              f"{' + node parameters ' + _parameters_text(parameter_overrides) if parameter_overrides else ''}, "
              f"seed {scenario.seed}, {duration:.0f} s simulated"
              f"{' (quick)' if quick else ''}{', OpenCV ' + opencv_dispatch if cameras == 'images' else ''}, "
-             f"{layout_name(processes, overlapped)} -> {output_dir}")
+             f"numeric code {numeric_dispatch_in_effect()}, {layout_name(processes, overlapped)} -> {output_dir}")
     wall_start = time.monotonic()
     live_view = None
     if live_view_port is not None:
@@ -268,7 +269,8 @@ def run_variant(experiment: Experiment, variant: Variant, output_dir: str, *, se
     mcap = write_mcap(recording, os.path.join(output_dir, "flight.mcap"), metadata={
         "experiment": experiment.id, "variant": variant.id, "scenario": resolved["scenario"],
         "script": resolved["script"], "mode": resolved["mode"], "cameras": cameras, "seed": str(scenario.seed),
-        "realism": scenario.realism, "opencv_dispatch": opencv_dispatch})
+        "realism": scenario.realism, "opencv_dispatch": opencv_dispatch,
+        "numeric_dispatch": numeric_dispatch_in_effect()})
     result = VariantResult(variant.id, metrics, checks, output_dir, record.sim_time, flight_wall, lockstep_timeouts,
                            completed, errors, record if plots else None)
     report.write_variant_json(result, record, os.path.join(output_dir, "metrics.json"), scenario)

@@ -1,0 +1,25 @@
+"""``run``'s numeric pin (fpr_model.numeric_dispatch) when run_main is called inside another Python process."""
+
+from __future__ import annotations
+
+import pytest
+from fpr_experiments.cli import _experiment_flags, _parser, pin_numeric_code
+from fpr_model.numeric_dispatch import numeric_dispatch_in_effect
+
+
+def test_in_another_process_the_pin_says_what_runs_and_does_not_restart_it(capsys):
+    if numeric_dispatch_in_effect() == "baseline":
+        pytest.skip("this test process already runs the pinned code")
+    pin_numeric_code("baseline", entry_point=False)  # would replace pytest's process if it restarted
+    assert "numeric code: native in this process" in capsys.readouterr().out
+    pin_numeric_code("native", entry_point=True)  # native: nothing to pin, nothing said
+    assert capsys.readouterr().out == ""
+
+
+def test_cpu_dispatch_takes_its_former_name_and_goes_to_each_experiment_of_run_all():
+    assert _parser().parse_args(["all"]).cpu_dispatch == "baseline"
+    args = _parser().parse_args(["all", "--opencv-dispatch", "native"])
+    assert args.cpu_dispatch == "native"
+    assert _experiment_flags(args)[-2:] == ["--cpu-dispatch", "native"]
+    with pytest.raises(SystemExit):
+        _parser().parse_args(["all", "--cpu-dispatch", "avx2"])
