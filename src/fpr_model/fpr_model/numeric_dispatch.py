@@ -21,16 +21,17 @@ the feature would see it, changed every metric from the ninth digit on (e.g. the
 
 All three are read once, at process start, so they cannot be switched in a running process as OpenCV can: a
 program that wants the pinned code starts itself again with :func:`pinned_environment` (:func:`reexec_pinned`).
-Its child processes inherit the environment. x86-64 only; on other architectures the variables do nothing and
-:func:`numeric_dispatch_in_effect` says ``native``. The robot's nodes run ``native``, as they are started.
+Its child processes inherit the environment. x86-64 only: on another architecture (aarch64) :func:`reexec_pinned`
+says so in one line and runs on, ``native``. numpy 1.26 (Ubuntu 24.04's, a real Jazzy install) and a distribution's
+libopenblas are asked the same way as the wheels. The robot's nodes run ``native``, as they are started.
 The speed cost, measured on the whole graph: docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
 import ctypes
-import glob
 import os
+import platform
 import sys
 from collections.abc import Mapping
 
@@ -43,11 +44,19 @@ GLIBC_HIDDEN = "-FMA,-FMA4"
 _HWCAPS = "glibc.cpu.hwcaps"
 
 
-def _numpy_dispatched_groups() -> list[str]:
-    """The CPU feature groups this numpy build dispatches on (build-time list: the same on every machine)."""
-    from numpy._core import _multiarray_umath
+def _umath():
+    """numpy's compiled core (``numpy._core`` from numpy 2, ``numpy.core`` in the numpy 1.26 of Ubuntu 24.04)."""
+    try:
+        from numpy._core import _multiarray_umath
+    except ImportError:  # numpy < 2
+        from numpy.core import _multiarray_umath
+    return _multiarray_umath
 
-    return list(_multiarray_umath.__cpu_dispatch__)
+
+def _numpy_dispatched_groups() -> list[str]:
+    """The CPU feature groups this numpy build dispatches on (build-time list: the same on every machine; a group
+    the machine lacks is skipped by numpy with a silent ImportWarning)."""
+    return list(_umath().__cpu_dispatch__)
 
 
 def _merged_tunables(current: str) -> str:
@@ -68,30 +77,54 @@ def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, st
     return environment
 
 
-def openblas_core() -> str | None:
-    """The kernel set numpy's OpenBLAS runs in this process (``SkylakeX``, ``Nehalem`` …); None when it cannot be
-    asked (another BLAS, another wheel layout)."""
-    import numpy
+_CORENAME_SYMBOLS = ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename64_",
+                     "openblas_get_corename")
 
-    for path in glob.glob(os.path.join(os.path.dirname(numpy.__file__), os.pardir, "numpy.libs", "*openblas*")):
-        library = ctypes.CDLL(path)
-        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename"):
+
+def _loaded_openblas_libraries() -> list[str]:
+    """Paths of the OpenBLAS libraries mapped into this process (numpy's and, once imported, scipy's wheels' copies,
+    or a distribution's libopenblas)."""
+    try:
+        with open("/proc/self/maps", encoding="utf-8") as maps:
+            paths = {line.split()[-1] for line in maps if "openblas" in line.rsplit("/", 1)[-1].lower()}
+    except OSError:
+        return []
+    return sorted(path for path in paths if path.startswith("/"))
+
+
+def openblas_cores() -> dict[str, str]:
+    """The kernel set (``SkylakeX``, ``Nehalem`` …) of every OpenBLAS loaded in this process that can be asked, by
+    library path; numpy (and its BLAS) imported first."""
+    import numpy  # noqa: F401  (loads numpy's BLAS)
+
+    cores = {}
+    for path in _loaded_openblas_libraries():
+        try:
+            library = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for symbol in _CORENAME_SYMBOLS:
             if hasattr(library, symbol):
                 function = getattr(library, symbol)
                 function.restype = ctypes.c_char_p
-                return function().decode()
-    return None
+                cores[path] = function().decode()
+                break
+    return cores
+
+
+def openblas_core() -> str | None:
+    """The kernel set of numpy's OpenBLAS (the first loaded that can be asked); None when none can (another BLAS,
+    not Linux)."""
+    return next(iter(openblas_cores().values()), None)
 
 
 def numeric_dispatch_in_effect() -> str:
     """``baseline`` when this process runs the pinned code (numpy's dispatched groups all off, OpenBLAS on the
     pinned kernels, libm's FMA hidden), ``native`` otherwise."""
-    from numpy._core import _multiarray_umath
-
-    features = _multiarray_umath.__cpu_features__
+    features = _umath().__cpu_features__
     numpy_pinned = not any(features.get(group, False) for group in _numpy_dispatched_groups())
-    core = openblas_core()
-    blas_pinned = core == OPENBLAS_CORE or (core is None and os.environ.get("OPENBLAS_CORETYPE") == OPENBLAS_CORE)
+    cores = set(openblas_cores().values())
+    blas_pinned = cores == {OPENBLAS_CORE} or (not cores and os.environ.get("OPENBLAS_CORETYPE") == OPENBLAS_CORE)
     libm_pinned = f"{_HWCAPS}={GLIBC_HIDDEN}" in os.environ.get("GLIBC_TUNABLES", "").split(":")
     return "baseline" if numpy_pinned and blas_pinned and libm_pinned else "native"
 
@@ -101,13 +134,17 @@ def reexec_pinned(argv: list[str] | None = None) -> None:
 
     ``argv``: the command line to run again (default ``sys.orig_argv``, the interpreter's own, ``-c`` / ``-m``
     included). Returns only when nothing needs doing. RuntimeError when a process already started again still is
-    not pinned (an architecture or library the pin does not cover): rather one clear error than a loop."""
+    not pinned (a library the pin does not cover): rather one clear error than a loop. On a CPU that is not x86-64
+    it says in one line that the code stays native, and returns."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        print(f"[fpr] numeric code: native (the pin covers x86-64 CPUs; this one is {platform.machine()}), so a "
+              f"flight here may differ in its last digits from the same flight on another CPU", flush=True)
+        return
     if numeric_dispatch_in_effect() == "baseline":
         return
     if os.environ.get(REEXEC_MARK):
-        core = openblas_core()
         raise RuntimeError(f"the numeric libraries' pinned code is not in effect after a restart in the pinned "
-                           f"environment (OpenBLAS core {core}, numpy groups {_numpy_dispatched_groups()}): fly "
+                           f"environment (OpenBLAS {openblas_cores()}, numpy groups {_numpy_dispatched_groups()}): fly "
                            f"with --cpu-dispatch native on this machine")
     command = list(sys.orig_argv if argv is None else argv)
     environment = pinned_environment()

@@ -10,14 +10,15 @@ import pytest
 from fpr_model.numeric_dispatch import (
     OPENBLAS_CORE,
     REEXEC_MARK,
+    _umath,
     numeric_dispatch_in_effect,
     openblas_core,
     pinned_environment,
     reexec_pinned,
 )
 
-_SAY = ("from fpr_model.numeric_dispatch import numeric_dispatch_in_effect, openblas_core; "
-        "print(numeric_dispatch_in_effect(), openblas_core())")
+_SAY = ("import scipy.linalg; from fpr_model.numeric_dispatch import numeric_dispatch_in_effect, openblas_cores; "
+        "print(numeric_dispatch_in_effect(), *sorted(set(openblas_cores().values())))")  # numpy's and scipy's
 
 
 def _clean_environment() -> dict[str, str]:
@@ -31,9 +32,7 @@ def test_the_pinned_environment_replaces_the_three_variables_and_keeps_other_tun
     assert environment["PATH"] == "/bin"
     assert environment["OPENBLAS_CORETYPE"] == OPENBLAS_CORE == "Nehalem"
     assert environment["GLIBC_TUNABLES"] == "glibc.malloc.check=1:glibc.cpu.hwcaps=-FMA,-FMA4"
-    from numpy._core import _multiarray_umath
-
-    assert environment["NPY_DISABLE_CPU_FEATURES"].split() == list(_multiarray_umath.__cpu_dispatch__)
+    assert environment["NPY_DISABLE_CPU_FEATURES"].split() == list(_umath().__cpu_dispatch__)
     assert pinned_environment({})["GLIBC_TUNABLES"] == "glibc.cpu.hwcaps=-FMA,-FMA4"
 
 
@@ -43,8 +42,8 @@ def test_a_process_started_in_the_pinned_environment_runs_the_pinned_code():
                             check=True).stdout.split()
     pinned = subprocess.run([sys.executable, "-c", _SAY], env=pinned_environment(_clean_environment()),
                             capture_output=True, text=True, check=True).stdout.split()
-    assert pinned == ["baseline", OPENBLAS_CORE]  # OpenBLAS took the name (an unknown one falls back to Katmai)
-    if native[1] != OPENBLAS_CORE:  # any CPU newer than a Nehalem
+    assert pinned == ["baseline", OPENBLAS_CORE]  # both OpenBLAS took the name (an unknown one falls back to Katmai)
+    if native[1:] != [OPENBLAS_CORE]:  # any CPU newer than a Nehalem
         assert native[0] == "native"
 
 
@@ -64,3 +63,11 @@ def test_a_restart_that_does_not_pin_stops_with_one_error_instead_of_looping(mon
     monkeypatch.setenv(REEXEC_MARK, "1")
     with pytest.raises(RuntimeError, match="not in effect after a restart"):
         reexec_pinned()
+
+
+def test_on_another_architecture_the_restart_says_so_and_runs_on(monkeypatch, capsys):
+    import platform
+
+    monkeypatch.setattr(platform, "machine", lambda: "aarch64")
+    reexec_pinned()  # returns: nothing to restart
+    assert "the pin covers x86-64 CPUs; this one is aarch64" in capsys.readouterr().out
