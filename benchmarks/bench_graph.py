@@ -25,6 +25,10 @@ setpoints computed on it) and as the overlapped layout schedules them (every ste
 period before the last: one period of added latency); then the overlapped layout is flown, interleaved with the
 one-process runner. The lever "overlapped layout" flies it among the others.
 
+``--numeric-dispatch baseline`` starts the benchmark again with numpy, OpenBLAS and libm pinned as the experiments
+fly them (fpr_model.numeric_dispatch; the default, ``native``, is what the figures before 2026-12-07's last session
+used); the first line says which code ran.
+
 The VMs these runs get differ by up to ×2.2 in speed from one session to the next, and one VM's speed drifts by
 up to ×1.5 within minutes (docs/benchmarks.md, 2026-12-07). So every line also gives a speed probe of the machine
 around that run: bench_control's n = 3 communicating controller step (Python and small numpy arrays, as most of the
