@@ -308,7 +308,8 @@ def pin_numeric_code(dispatch: str, entry_point: bool) -> None:
     if dispatch != "baseline" or numeric_dispatch_in_effect() == "baseline":
         return
     if entry_point:
-        reexec_pinned()
+        reexec_pinned()  # returns only on a CPU the pin does not cover, having said so
+        return
     print("[fpr] numeric code: native in this process (run_main called in-process), so these flights may differ "
           "in their last digits on another CPU; `ros2 run fpr_experiments run` pins it", flush=True)
 

@@ -23,3 +23,14 @@ def test_cpu_dispatch_takes_its_former_name_and_goes_to_each_experiment_of_run_a
     assert _experiment_flags(args)[-2:] == ["--cpu-dispatch", "native"]
     with pytest.raises(SystemExit):
         _parser().parse_args(["all", "--cpu-dispatch", "avx2"])
+
+
+def test_as_the_program_on_another_architecture_it_says_one_line_and_flies(monkeypatch, capsys):
+    import platform
+
+    if numeric_dispatch_in_effect() == "baseline":
+        pytest.skip("this test process already runs the pinned code")
+    monkeypatch.setattr(platform, "machine", lambda: "aarch64")
+    pin_numeric_code("baseline", entry_point=True)  # no restart on aarch64: the pin is x86-64's
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1 and "this one is aarch64" in lines[0]
