@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import statistics
@@ -40,6 +41,7 @@ ISSUE = {"n3_emulated": ((0.72, 0.99), 3.0), "n3_images": ((0.16, 0.16), 2.0),
 WORKSPACE_VARIABLES = ("VIRTUAL_ENV", "PYTHONPATH", "AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "CMAKE_PREFIX_PATH",
                        "LD_LIBRARY_PATH", "FPR_ROOT", "PYTHONHOME", "_ROS_WHEELS_BOOTSTRAP_COMPLETE")
 _NOW_LINE = re.compile(r"RTF\s+([\d.]+)\s+probe\s+(\d+)/(\d+) us\s+CPU/sim-s\s+([\d.]+)")
+_CLIMBED = re.compile(r"climbed\s+([-\d.na]+) m")
 
 
 def baseline_environment(root: str = ROOT) -> dict[str, str]:
@@ -72,8 +74,9 @@ def run_now(case: str, seconds: float) -> dict:
     for line in done.stdout.splitlines():
         match = _NOW_LINE.search(line)
         if match and line.startswith(case):
+            climbed = _CLIMBED.search(line)
             return {"rtf": float(match[1]), "probe_us": (float(match[2]) + float(match[3])) / 2.0,
-                    "cpu_per_sim_s": float(match[4])}
+                    "cpu_per_sim_s": float(match[4]), "height_gain": float(climbed[1]) if climbed else math.nan}
     raise RuntimeError(f"today's {case}: no result (exit {done.returncode}); last output:\n"
                        + "\n".join((done.stdout + done.stderr).splitlines()[-15:]))
 
@@ -147,7 +150,7 @@ def main() -> None:
             after = run_now(case, args.seconds)
             results[case]["after"].append(after)
             print(f"{case:12s} after   RTF {after['rtf']:5.2f}  CPU/sim-s {after['cpu_per_sim_s']:5.2f}  "
-                  f"probe {after['probe_us']:3.0f} us", flush=True)
+                  f"probe {after['probe_us']:3.0f} us  climbed {after['height_gain']:4.2f} m", flush=True)
     print(f"# load average {os.getloadavg()[0]:.2f} at the end\n")
     print(report(results))
 

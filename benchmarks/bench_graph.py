@@ -227,13 +227,16 @@ def run_case(case: str, deterministic: bool, lean: bool, clock_rate: float, seco
         simulated = graph.sim_time
         timeouts = graph.lockstep_timeouts
         period_costs = list(graph.period_costs)
+        # how far the platform climbed: the flight was flown, not only the ground phase (after the timing)
+        heights = [m.platform_pose.position.z for m in graph.recorder.snapshot().get("/fpr/ground_truth")]
     ticks_us = sorted(1e6 * t for t in ticks)
     return {"period_costs": period_costs,
             "tick_median_us": ticks_us[len(ticks_us) // 2] if ticks_us else math.nan,
             "tick_p95_us": ticks_us[int(0.95 * (len(ticks_us) - 1))] if ticks_us else math.nan,
             "case": case, "lean": lean, "clock_rate": clock_rate, "simulated": simulated, "wall": wall, "cpu": cpu,
             "rtf": simulated / wall, "cpu_per_sim_s": cpu / simulated, "timeouts": timeouts, "entities": entities,
-            "load": (load_before, os.getloadavg()[0])}
+            "load": (load_before, os.getloadavg()[0]),
+            "climbed": max(heights) - heights[0] if heights else math.nan}
 
 
 def main() -> None:
@@ -287,7 +290,8 @@ def main() -> None:
                   f"probe {step_before:3.0f}/{step_after:3.0f} us  CPU/sim-s {r['cpu_per_sim_s']:5.2f}{split}  "
                   f"x{r['rtf'] / baseline['rtf']:4.2f} vs baseline  "
                   f"controller step {r['tick_median_us']:4.0f} us (p95 {r['tick_p95_us']:4.0f})  "
-                  f"entities {r['entities']:4d}  timeouts {r['timeouts']}  load {r['load'][0]:.2f}->{r['load'][1]:.2f}",
+                  f"entities {r['entities']:4d}  timeouts {r['timeouts']}  "
+                  f"load {r['load'][0]:.2f}->{r['load'][1]:.2f}  climbed {r['climbed']:4.2f} m",
                   flush=True)
             runs.append((case, name, r["rtf"]))
     for line in summary(runs):
