@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 15 re-measured before and after on this machine (benchmarks/bench_before_after.py says why and how):
-#   1. clone this repository's main-as-it-was (74a841e, or FPR_BASELINE_COMMIT) into FPR_BASELINE_DIR (default
+#   1. clone this repository's main-as-it-was (bench_before_after.BASELINE_COMMIT) into FPR_BASELINE_DIR (default
 #      $TMPDIR/fpr-baseline-<commit>) and set it up with its own scripts/setup.sh (pip may need the package
 #      index, so outside the network isolation; no ROS node runs in this step), once;
 #   2. copy the baseline flight (benchmarks/baseline/swarm_graph_rtf.py) into it;
@@ -8,12 +8,13 @@
 # Usage: bash benchmarks/before_after.sh [--cases ...] [--seconds 12] [--repeats 2]; quiet machine only.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-COMMIT="${FPR_BASELINE_COMMIT:-74a841e}"
+# the one commit the issue's figures belong to, named once in bench_before_after.py (stdlib imports only)
+COMMIT="$(python3 -c "import sys; sys.path.insert(0, sys.argv[1]); import bench_before_after as b; print(b.BASELINE_COMMIT)" "$ROOT/benchmarks")"
 DIR="${FPR_BASELINE_DIR:-${TMPDIR:-/tmp}/fpr-baseline-$COMMIT}"
 say() { printf '[before_after] %s\n' "$*" >&2; }
 if [[ ! -f "$DIR/.fpr-baseline-ready" ]]; then
   if ! git -C "$ROOT" cat-file -e "$COMMIT^{commit}" 2>/dev/null; then
-    say "commit $COMMIT is not in this clone (a shallow clone?): git fetch --unshallow, or set FPR_BASELINE_COMMIT"
+    say "commit $COMMIT is not in this clone (a shallow clone?): git fetch --unshallow"
     exit 1
   fi
   say "checking out $COMMIT into $DIR and setting it up (about 2 min, log: $DIR/log/setup)"

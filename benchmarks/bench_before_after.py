@@ -129,8 +129,15 @@ def main() -> None:
     unknown = [case for case in cases if case not in ISSUE]
     if unknown:
         parser.error(f"unknown case(s) {unknown}; choose from {list(ISSUE)}")
+    if not (math.isfinite(args.seconds) and 1.0 <= args.seconds <= 600.0) or not 1 <= args.repeats <= 20:
+        parser.error("--seconds: 1-600 simulated seconds; --repeats: 1-20 flights per case and side")
     if os.environ.get("FPR_IN_NETNS") != "1":
         parser.error("run it through the network isolation: bash benchmarks/before_after.sh")
+    checked_out = subprocess.run(["git", "-C", args.baseline_dir, "rev-parse", "HEAD"], capture_output=True,
+                                 text=True, check=False).stdout.strip()
+    if not checked_out.startswith(BASELINE_COMMIT):
+        parser.error(f"{args.baseline_dir} holds {checked_out or 'no git checkout'}, not {BASELINE_COMMIT}, the "
+                     f"commit the issue's figures belong to (bash benchmarks/before_after.sh sets it up)")
     from bench_graph import reference_step_us
 
     print(f"# before: main at {BASELINE_COMMIT} ({args.baseline_dir}); after: this checkout's default runner; "
